@@ -1,0 +1,298 @@
+"""Human motion: the Social Force Model of the paper's environment, ORCA, and the position update.
+
+Both policies are computed for the whole batch at once; each human then follows the one it drew
+at spawn (``state.human_policy``). All humans move simultaneously from the same snapshot (the
+paper's environment updated them one after the other, so later humans saw earlier ones' new
+positions; a batched simulator has no such order, and the difference is a fraction of a step).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from pipeline.env import orca
+from pipeline.env.params import EnvParams
+from pipeline.env.scenario import (
+    POLICY_ORCA,
+    POLICY_SFM,
+    STREAM_AVOID_ROBOT,
+    draw_human_goal,
+    uniform,
+)
+from pipeline.env.state import BatchState
+
+
+@numba.njit(cache=True)
+def sfm_velocities(
+    seed: int,
+    scenario_id: np.ndarray,
+    step_count: np.ndarray,
+    human_xy: np.ndarray,
+    human_theta: np.ndarray,
+    human_speed: np.ndarray,
+    human_goal: np.ndarray,
+    human_policy: np.ndarray,
+    robot_xy: np.ndarray,
+    wall_half: float,
+    human_radius: float,
+    robot_radius: float,
+    max_speed: float,
+    avoid_robot_prob: float,
+    r0: float,
+    gamma: float,
+    n: float,
+    n_prime: float,
+    lam: float,
+    weight: float,
+    dt: float,
+    out: np.ndarray,
+) -> None:
+    """Social-force velocities (N, H, 2) in m/s, written into ``out`` for SFM humans only.
+
+    The force is the paper environment's (paper_spec §1): a desired term ``max_speed·e_goal``,
+    exponential repulsion ``exp(−d/r0)·e_o`` from each wall (and from the robot, with
+    probability ``avoid_robot_prob`` per human per step), and the Moussaïd-style interaction
+    force of every other human; each term weighted by ``weight``. Velocity = force/m·dt, m = 1,
+    capped at ``max_speed``.
+    """
+    num_envs, num_humans = human_theta.shape
+    for e in range(num_envs):
+        for i in range(num_humans):
+            if human_policy[e, i] != POLICY_SFM:
+                continue
+            px = human_xy[e, i, 0]
+            py = human_xy[e, i, 1]
+            # Desired force towards the goal at full speed.
+            gx = human_goal[e, i, 0] - px
+            gy = human_goal[e, i, 1] - py
+            gnorm = math.hypot(gx, gy)
+            fx = 0.0
+            fy = 0.0
+            if gnorm > 0.0:
+                fx = weight * max_speed * gx / gnorm
+                fy = weight * max_speed * gy / gnorm
+            # Walls: the nearest point of each wall is on its inner face.
+            fx += weight * math.exp(-(wall_half - px - human_radius) / r0) * -1.0
+            fx += weight * math.exp(-(px + wall_half - human_radius) / r0)
+            fy += weight * math.exp(-(wall_half - py - human_radius) / r0) * -1.0
+            fy += weight * math.exp(-(py + wall_half - human_radius) / r0)
+            # The robot, seen only now and then, as in the paper's environment.
+            if avoid_robot_prob > 0.0:
+                coin = uniform(seed, scenario_id[e], STREAM_AVOID_ROBOT, i, step_count[e], 0)
+                if coin < avoid_robot_prob:
+                    ox = px - robot_xy[e, 0]
+                    oy = py - robot_xy[e, 1]
+                    dist = math.hypot(ox, oy)
+                    if dist > 0.0:
+                        mag = weight * math.exp(-(dist - robot_radius - human_radius) / r0)
+                        fx += mag * ox / dist
+                        fy += mag * oy / dist
+            # Other humans.
+            vix = human_speed[e, i] * math.cos(human_theta[e, i])
+            viy = human_speed[e, i] * math.sin(human_theta[e, i])
+            for j in range(num_humans):
+                if j == i:
+                    continue
+                ex = human_xy[e, j, 0] - px
+                ey = human_xy[e, j, 1] - py
+                d_ij = math.hypot(ex, ey)
+                if d_ij > 0.0:
+                    ex /= d_ij
+                    ey /= d_ij
+                vjx = human_speed[e, j] * math.cos(human_theta[e, j])
+                vjy = human_speed[e, j] * math.sin(human_theta[e, j])
+                dx = lam * (vjx - vix) + ex
+                dy = lam * (vjy - viy) + ey
+                dnorm = math.hypot(dx, dy)
+                b = gamma * dnorm
+                if dnorm == 0.0 or b == 0.0:
+                    continue
+                tx = dx / dnorm
+                ty = dy / dnorm
+                cos_angle = min(1.0, max(-1.0, ex * tx + ey * ty))
+                theta = math.acos(cos_angle)
+                nx = -ey
+                ny = ex
+                decay = math.exp(-d_ij / b)
+                a_t = math.exp(-((n_prime * b * theta) ** 2))
+                a_n = math.exp(-((n * b * theta) ** 2))
+                fx += weight * -decay * (a_t * tx + a_n * nx)
+                fy += weight * -decay * (a_t * ty + a_n * ny)
+            vx = fx * dt
+            vy = fy * dt
+            speed = math.hypot(vx, vy)
+            if speed > max_speed:
+                vx *= max_speed / speed
+                vy *= max_speed / speed
+            out[e, i, 0] = vx
+            out[e, i, 1] = vy
+
+
+@numba.njit(cache=True)
+def move_humans(
+    seed: int,
+    scenario_id: np.ndarray,
+    active: np.ndarray,
+    velocity: np.ndarray,
+    human_xy: np.ndarray,
+    human_theta: np.ndarray,
+    human_speed: np.ndarray,
+    human_goal: np.ndarray,
+    human_goal_index: np.ndarray,
+    speed_threshold: float,
+    wall_half: float,
+    spawn_half: float,
+    human_radius: float,
+    goal_reached_distance: float,
+    dt: float,
+) -> None:
+    """Move every human of the ``active`` envs along ``velocity`` (N, H, 2) for one step.
+
+    As in the paper's environment: speeds below ``speed_threshold`` become 0 and the heading
+    follows the velocity. Humans are kept inside the walls (a wall is a hard boundary for the
+    dynamics, not just a force). A human within ``goal_reached_distance`` of its goal draws its
+    next goal, keyed by the goal's index so the draw does not depend on when it happens.
+    """
+    num_envs, num_humans = human_theta.shape
+    limit = wall_half - human_radius
+    for e in range(num_envs):
+        if not active[e]:
+            continue
+        for i in range(num_humans):
+            vx = velocity[e, i, 0]
+            vy = velocity[e, i, 1]
+            speed = math.hypot(vx, vy)
+            if speed > 0.0:
+                human_theta[e, i] = math.atan2(vy, vx)
+            if speed < speed_threshold:
+                speed = 0.0
+            human_speed[e, i] = speed
+            x = human_xy[e, i, 0] + speed * dt * math.cos(human_theta[e, i])
+            y = human_xy[e, i, 1] + speed * dt * math.sin(human_theta[e, i])
+            human_xy[e, i, 0] = min(limit, max(-limit, x))
+            human_xy[e, i, 1] = min(limit, max(-limit, y))
+            gdist = math.hypot(
+                human_goal[e, i, 0] - human_xy[e, i, 0], human_goal[e, i, 1] - human_xy[e, i, 1]
+            )
+            if gdist < goal_reached_distance:
+                human_goal_index[e, i] += 1
+                gx, gy = draw_human_goal(
+                    seed, scenario_id[e], i, human_goal_index[e, i], spawn_half
+                )
+                human_goal[e, i, 0] = gx
+                human_goal[e, i, 1] = gy
+
+
+class HumanDynamics:
+    """Computes and applies the humans' step for a batch; holds reusable scratch arrays."""
+
+    def __init__(self, params: EnvParams, num_envs: int) -> None:
+        self.params = params
+        h = params.num_humans
+        self.obstacles = orca.room_obstacles(params.wall_half_size)
+        self.orca_params = orca.OrcaParams(
+            neighbor_dist=params.orca_neighbor_dist,
+            max_neighbors=params.orca_max_neighbors,
+            time_horizon=params.orca_time_horizon,
+            time_horizon_obst=params.orca_time_horizon_obst,
+            time_step=params.dt,
+        )
+        agents = h + (1 if params.orca_avoid_robot else 0)
+        self._radius = np.full((num_envs, agents), params.human_radius)
+        self._max_speed = np.full((num_envs, agents), params.human_max_speed)
+        if params.orca_avoid_robot:
+            self._radius[:, h] = params.robot_radius
+            self._max_speed[:, h] = params.robot_max_speed
+        self._velocity = np.zeros((num_envs, h, 2))
+
+    def velocities(self, seed: int, state: BatchState) -> np.ndarray:
+        """(N, H, 2) new velocities of every human (m/s), from the current snapshot."""
+        p = self.params
+        velocity = self._velocity
+        velocity[:] = 0.0
+        policies = state.human_policy
+        if p.human_policy != "orca":
+            sfm_velocities(
+                seed,
+                state.scenario_id,
+                state.step_count,
+                state.human_xy,
+                state.human_theta,
+                state.human_speed,
+                state.human_goal,
+                policies,
+                state.robot_xy,
+                p.wall_half_size,
+                p.human_radius,
+                p.robot_radius,
+                p.human_max_speed,
+                p.sfm_avoid_robot_prob,
+                p.sfm_wall_range,
+                p.sfm_gamma,
+                p.sfm_n,
+                p.sfm_n_prime,
+                p.sfm_lambda,
+                p.sfm_weight,
+                p.dt,
+                velocity,
+            )
+        if p.human_policy != "sfm":
+            orca_v = self._orca(state)
+            is_orca = (policies == POLICY_ORCA)[..., None]
+            np.copyto(velocity, orca_v, where=is_orca)
+        return velocity
+
+    def _orca(self, state: BatchState) -> np.ndarray:
+        p = self.params
+        h = p.num_humans
+        position = state.human_xy
+        current = state.human_velocity()
+        to_goal = state.human_goal - position
+        dist = np.linalg.norm(to_goal, axis=-1, keepdims=True)
+        pref = np.divide(
+            to_goal * p.human_max_speed, dist, out=np.zeros_like(to_goal), where=dist > 0
+        )
+        compute = state.human_policy == POLICY_ORCA
+        if p.orca_avoid_robot:
+            # The robot joins as an agent that does not reciprocate (compute=False).
+            robot_v = state.robot_v[:, None] * np.stack(
+                (np.cos(state.robot_theta), np.sin(state.robot_theta)), axis=-1
+            )
+            position = np.concatenate((position, state.robot_xy[:, None]), axis=1)
+            current = np.concatenate((current, robot_v[:, None]), axis=1)
+            pref = np.concatenate((pref, robot_v[:, None]), axis=1)
+            compute = np.concatenate((compute, np.zeros((state.num_envs, 1), bool)), axis=1)
+        new_v = orca.orca_velocities(
+            position,
+            current,
+            pref,
+            self._radius,
+            self._max_speed,
+            compute,
+            self.obstacles,
+            self.orca_params,
+        )
+        return new_v[:, :h]
+
+    def move(self, seed: int, state: BatchState, velocity: np.ndarray, active: np.ndarray) -> None:
+        p = self.params
+        move_humans(
+            seed,
+            state.scenario_id,
+            active,
+            velocity,
+            state.human_xy,
+            state.human_theta,
+            state.human_speed,
+            state.human_goal,
+            state.human_goal_index,
+            p.human_speed_threshold,
+            p.wall_half_size,
+            p.spawn_half_size,
+            p.human_radius,
+            p.human_radius + p.human_goal_radius,
+            p.dt,
+        )

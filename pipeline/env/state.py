@@ -1,0 +1,79 @@
+"""The simulator's state: plain arrays with a leading ``num_envs`` axis.
+
+A single environment is a batch of one; nothing in the simulator holds per-env Python objects.
+World frame: origin at the room centre, x right, y up, angles counter-clockwise from +x.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+COLLISION_NONE = 0
+COLLISION_HUMAN = 1
+COLLISION_WALL = 2
+COLLISION_NAMES = ("none", "human", "wall")
+
+
+@dataclass
+class BatchState:
+    """Every mutable quantity of ``num_envs`` environments (float64 for the dynamics)."""
+
+    robot_xy: np.ndarray  # (N, 2) m
+    robot_theta: np.ndarray  # (N,) rad, in (-pi, pi]
+    robot_v: np.ndarray  # (N,) last commanded linear speed, m/s
+    robot_omega: np.ndarray  # (N,) last commanded angular speed, rad/s
+    goal_xy: np.ndarray  # (N, 2) m
+    start_xy: np.ndarray  # (N, 2) robot position at reset, m
+    human_xy: np.ndarray  # (N, H, 2) m
+    human_theta: np.ndarray  # (N, H) heading, rad
+    human_speed: np.ndarray  # (N, H) m/s
+    human_goal: np.ndarray  # (N, H, 2) m
+    human_goal_index: np.ndarray  # (N, H) int64: how many goals the human has drawn so far
+    human_policy: np.ndarray  # (N, H) int8: scenario.POLICY_SFM or POLICY_ORCA
+    step_count: np.ndarray  # (N,) int64: steps taken in the current episode
+    scenario_id: np.ndarray  # (N,) int64: which scenario of the seed runs in each slot
+    alive_sum: np.ndarray  # (N,) accumulated alive penalty (paper reward's A)
+    discomfort_sum: np.ndarray  # (N,) accumulated discomfort penalty (paper reward's S)
+    done: np.ndarray  # (N,) bool: the episode in this slot has ended and awaits a reset
+
+    @classmethod
+    def zeros(cls, num_envs: int, num_humans: int) -> BatchState:
+        n, h = num_envs, num_humans
+        return cls(
+            robot_xy=np.zeros((n, 2)),
+            robot_theta=np.zeros(n),
+            robot_v=np.zeros(n),
+            robot_omega=np.zeros(n),
+            goal_xy=np.zeros((n, 2)),
+            start_xy=np.zeros((n, 2)),
+            human_xy=np.zeros((n, h, 2)),
+            human_theta=np.zeros((n, h)),
+            human_speed=np.zeros((n, h)),
+            human_goal=np.zeros((n, h, 2)),
+            human_goal_index=np.zeros((n, h), dtype=np.int64),
+            human_policy=np.zeros((n, h), dtype=np.int8),
+            step_count=np.zeros(n, dtype=np.int64),
+            scenario_id=np.zeros(n, dtype=np.int64),
+            alive_sum=np.zeros(n),
+            discomfort_sum=np.zeros(n),
+            done=np.zeros(n, dtype=bool),
+        )
+
+    @property
+    def num_envs(self) -> int:
+        return self.robot_theta.shape[0]
+
+    @property
+    def num_humans(self) -> int:
+        return self.human_theta.shape[1]
+
+    def copy(self) -> BatchState:
+        return BatchState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    def human_velocity(self) -> np.ndarray:
+        """(N, H, 2) world-frame human velocities, m/s."""
+        return self.human_speed[..., None] * np.stack(
+            (np.cos(self.human_theta), np.sin(self.human_theta)), axis=-1
+        )
