@@ -20,6 +20,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from pipeline.env.geometry import norm
 from pipeline.env.humans import HumanDynamics
 from pipeline.env.observation import observation_size, observe
 from pipeline.env.params import EnvParams
@@ -48,7 +49,7 @@ class StepResult:
     info: dict[str, np.ndarray]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _advance_robot(
     active: np.ndarray,
     v: np.ndarray,
@@ -64,7 +65,12 @@ def _advance_robot(
         if not active[e]:
             continue
         theta = robot_theta[e] + omega[e] * dt
-        theta = math.atan2(math.sin(theta), math.cos(theta))
+        # Wrap to (−π, π]; one turn is at most |ω|·dt, so one correction is enough for any
+        # command the robot can execute.
+        while theta > math.pi:
+            theta -= 2.0 * math.pi
+        while theta <= -math.pi:
+            theta += 2.0 * math.pi
         robot_theta[e] = theta
         robot_xy[e, 0] += v[e] * dt * math.cos(theta)
         robot_xy[e, 1] += v[e] * dt * math.sin(theta)
@@ -72,7 +78,7 @@ def _advance_robot(
         robot_omega[e] = omega[e]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _outcomes(
     active: np.ndarray,
     robot_xy: np.ndarray,
@@ -97,11 +103,11 @@ def _outcomes(
         step_count[e] += 1
         rx = robot_xy[e, 0]
         ry = robot_xy[e, 1]
-        if math.hypot(goal_xy[e, 0] - rx, goal_xy[e, 1] - ry) < success_distance:
+        if norm(goal_xy[e, 0] - rx, goal_xy[e, 1] - ry) < success_distance:
             success[e] = True
             continue
         for h in range(human_xy.shape[1]):
-            if math.hypot(human_xy[e, h, 0] - rx, human_xy[e, h, 1] - ry) <= contact_distance:
+            if norm(human_xy[e, h, 0] - rx, human_xy[e, h, 1] - ry) <= contact_distance:
                 collision[e] = COLLISION_HUMAN
                 break
         if collision[e] == COLLISION_NONE and (abs(rx) >= wall_limit or abs(ry) >= wall_limit):
@@ -141,9 +147,9 @@ class Simulator:
         self._success = np.zeros(self.num_envs, dtype=bool)
         self._collision = np.zeros(self.num_envs, dtype=np.int8)
         self._truncated = np.zeros(self.num_envs, dtype=bool)
-        self._policy_mode = -1 if self.params.human_policy == "mixed" else POLICY_CODES[
-            self.params.human_policy
-        ]
+        self._policy_mode = (
+            -1 if self.params.human_policy == "mixed" else POLICY_CODES[self.params.human_policy]
+        )
         self._min_goal_distance = max(self.params.min_goal_distance, self.params.success_distance)
 
     # ------------------------------------------------------------------ reset
@@ -199,7 +205,7 @@ class Simulator:
             s.robot_theta,
             s.goal_xy,
             s.human_xy,
-            s.human_theta,
+            s.human_heading,
             s.human_speed,
             s.human_goal,
             s.human_goal_index,
@@ -225,7 +231,7 @@ class Simulator:
             s.robot_omega,
             s.goal_xy,
             s.human_xy,
-            s.human_theta,
+            s.human_heading,
             s.human_speed,
             p.human_radius,
             envs,
@@ -284,7 +290,7 @@ class Simulator:
             s.robot_v,
             s.robot_omega,
             s.human_xy,
-            s.human_theta,
+            s.human_heading,
             s.human_speed,
             p.robot_radius,
             p.human_radius,
@@ -316,7 +322,7 @@ class Simulator:
             s.robot_omega,
             s.goal_xy,
             s.human_xy,
-            s.human_theta,
+            s.human_heading,
             s.human_speed,
             p.human_radius,
             envs,
@@ -345,7 +351,7 @@ class Simulator:
             "robot_theta": s.robot_theta.copy(),
             "goal_xy": s.goal_xy.copy(),
             "human_xy": s.human_xy.copy(),
-            "human_theta": s.human_theta.copy(),
+            "human_theta": s.human_theta(),
             "scenario_id": s.scenario_id.copy(),
             "step": s.step_count.copy(),
         }

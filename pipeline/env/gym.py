@@ -141,7 +141,7 @@ def scene_of(sim: Simulator, env: int, trail: np.ndarray | None = None, title: s
         goal_xy=s.goal_xy[env].copy(),
         goal_radius=p.goal_radius,
         human_xy=s.human_xy[env].copy(),
-        human_theta=s.human_theta[env].copy(),
+        human_theta=s.human_theta()[env],
         human_radius=p.human_radius,
         personal_space=0.5,
         room_half_size=p.wall_half_size,
@@ -174,9 +174,7 @@ class SocNavVectorEnv(VectorEnv):
         self.num_envs = self.sim.num_envs
         self.action_type = action_type
         self.render_mode = render_mode
-        self.single_observation_space, self.single_action_space = _spaces(
-            self.params, action_type
-        )
+        self.single_observation_space, self.single_action_space = _spaces(self.params, action_type)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
 

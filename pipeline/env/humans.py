@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from pipeline.env import orca
+from pipeline.env.geometry import norm
 from pipeline.env.params import EnvParams
 from pipeline.env.scenario import (
     POLICY_ORCA,
@@ -24,14 +25,24 @@ from pipeline.env.scenario import (
 )
 from pipeline.env.state import BatchState
 
+# exp(-x) below exp(-40) ≈ 4e-18 is lost next to the desired force (≈ 0.08): skip the call.
+_EXP_CUTOFF = 40.0
 
-@numba.njit(cache=True)
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _wall_push(gap: float, r0: float) -> float:
+    """exp(−gap/r0), the paper's obstacle repulsion, skipped where it underflows."""
+    x = gap / r0
+    return math.exp(-x) if x < _EXP_CUTOFF else 0.0
+
+
+@numba.njit(cache=True, error_model="numpy")
 def sfm_velocities(
     seed: int,
     scenario_id: np.ndarray,
     step_count: np.ndarray,
     human_xy: np.ndarray,
-    human_theta: np.ndarray,
+    human_heading: np.ndarray,
     human_speed: np.ndarray,
     human_goal: np.ndarray,
     human_policy: np.ndarray,
@@ -58,7 +69,7 @@ def sfm_velocities(
     force of every other human; each term weighted by ``weight``. Velocity = force/m·dt, m = 1,
     capped at ``max_speed``.
     """
-    num_envs, num_humans = human_theta.shape
+    num_envs, num_humans = human_speed.shape
     for e in range(num_envs):
         for i in range(num_humans):
             if human_policy[e, i] != POLICY_SFM:
@@ -68,62 +79,58 @@ def sfm_velocities(
             # Desired force towards the goal at full speed.
             gx = human_goal[e, i, 0] - px
             gy = human_goal[e, i, 1] - py
-            gnorm = math.hypot(gx, gy)
+            gnorm = norm(gx, gy)
             fx = 0.0
             fy = 0.0
             if gnorm > 0.0:
                 fx = weight * max_speed * gx / gnorm
                 fy = weight * max_speed * gy / gnorm
             # Walls: the nearest point of each wall is on its inner face.
-            fx += weight * math.exp(-(wall_half - px - human_radius) / r0) * -1.0
-            fx += weight * math.exp(-(px + wall_half - human_radius) / r0)
-            fy += weight * math.exp(-(wall_half - py - human_radius) / r0) * -1.0
-            fy += weight * math.exp(-(py + wall_half - human_radius) / r0)
+            fx -= weight * _wall_push(wall_half - px - human_radius, r0)
+            fx += weight * _wall_push(px + wall_half - human_radius, r0)
+            fy -= weight * _wall_push(wall_half - py - human_radius, r0)
+            fy += weight * _wall_push(py + wall_half - human_radius, r0)
             # The robot, seen only now and then, as in the paper's environment.
             if avoid_robot_prob > 0.0:
                 coin = uniform(seed, scenario_id[e], STREAM_AVOID_ROBOT, i, step_count[e], 0)
                 if coin < avoid_robot_prob:
                     ox = px - robot_xy[e, 0]
                     oy = py - robot_xy[e, 1]
-                    dist = math.hypot(ox, oy)
+                    dist = norm(ox, oy)
                     if dist > 0.0:
-                        mag = weight * math.exp(-(dist - robot_radius - human_radius) / r0)
+                        mag = weight * _wall_push(dist - robot_radius - human_radius, r0)
                         fx += mag * ox / dist
                         fy += mag * oy / dist
             # Other humans.
-            vix = human_speed[e, i] * math.cos(human_theta[e, i])
-            viy = human_speed[e, i] * math.sin(human_theta[e, i])
+            vix = human_speed[e, i] * human_heading[e, i, 0]
+            viy = human_speed[e, i] * human_heading[e, i, 1]
             for j in range(num_humans):
                 if j == i:
                     continue
                 ex = human_xy[e, j, 0] - px
                 ey = human_xy[e, j, 1] - py
-                d_ij = math.hypot(ex, ey)
+                d_ij = norm(ex, ey)
                 if d_ij > 0.0:
                     ex /= d_ij
                     ey /= d_ij
-                vjx = human_speed[e, j] * math.cos(human_theta[e, j])
-                vjy = human_speed[e, j] * math.sin(human_theta[e, j])
-                dx = lam * (vjx - vix) + ex
-                dy = lam * (vjy - viy) + ey
-                dnorm = math.hypot(dx, dy)
+                dx = lam * (human_speed[e, j] * human_heading[e, j, 0] - vix) + ex
+                dy = lam * (human_speed[e, j] * human_heading[e, j, 1] - viy) + ey
+                dnorm = norm(dx, dy)
                 b = gamma * dnorm
-                if dnorm == 0.0 or b == 0.0:
+                if b == 0.0:
                     continue
                 tx = dx / dnorm
                 ty = dy / dnorm
-                cos_angle = min(1.0, max(-1.0, ex * tx + ey * ty))
-                theta = math.acos(cos_angle)
-                nx = -ey
-                ny = ex
+                theta = math.acos(min(1.0, max(-1.0, ex * tx + ey * ty)))
                 decay = math.exp(-d_ij / b)
                 a_t = math.exp(-((n_prime * b * theta) ** 2))
-                a_n = math.exp(-((n * b * theta) ** 2))
-                fx += weight * -decay * (a_t * tx + a_n * nx)
-                fy += weight * -decay * (a_t * ty + a_n * ny)
+                a_n = a_t if n == n_prime else math.exp(-((n * b * theta) ** 2))
+                # The normal is e_ij turned left: (−e_y, e_x).
+                fx -= weight * decay * (a_t * tx - a_n * ey)
+                fy -= weight * decay * (a_t * ty + a_n * ex)
             vx = fx * dt
             vy = fy * dt
-            speed = math.hypot(vx, vy)
+            speed = norm(vx, vy)
             if speed > max_speed:
                 vx *= max_speed / speed
                 vy *= max_speed / speed
@@ -131,14 +138,14 @@ def sfm_velocities(
             out[e, i, 1] = vy
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def move_humans(
     seed: int,
     scenario_id: np.ndarray,
     active: np.ndarray,
     velocity: np.ndarray,
     human_xy: np.ndarray,
-    human_theta: np.ndarray,
+    human_heading: np.ndarray,
     human_speed: np.ndarray,
     human_goal: np.ndarray,
     human_goal_index: np.ndarray,
@@ -152,11 +159,12 @@ def move_humans(
     """Move every human of the ``active`` envs along ``velocity`` (N, H, 2) for one step.
 
     As in the paper's environment: speeds below ``speed_threshold`` become 0 and the heading
-    follows the velocity. Humans are kept inside the walls (a wall is a hard boundary for the
-    dynamics, not just a force). A human within ``goal_reached_distance`` of its goal draws its
-    next goal, keyed by the goal's index so the draw does not depend on when it happens.
+    follows the velocity (a zero velocity keeps the old heading). Humans are kept inside the
+    walls (a wall is a hard boundary for the dynamics, not just a force). A human within
+    ``goal_reached_distance`` of its goal draws its next goal, keyed by the goal's index so the
+    draw does not depend on when it happens.
     """
-    num_envs, num_humans = human_theta.shape
+    num_envs, num_humans = human_speed.shape
     limit = wall_half - human_radius
     for e in range(num_envs):
         if not active[e]:
@@ -164,20 +172,20 @@ def move_humans(
         for i in range(num_humans):
             vx = velocity[e, i, 0]
             vy = velocity[e, i, 1]
-            speed = math.hypot(vx, vy)
+            speed = norm(vx, vy)
             if speed > 0.0:
-                human_theta[e, i] = math.atan2(vy, vx)
+                human_heading[e, i, 0] = vx / speed
+                human_heading[e, i, 1] = vy / speed
             if speed < speed_threshold:
                 speed = 0.0
             human_speed[e, i] = speed
-            x = human_xy[e, i, 0] + speed * dt * math.cos(human_theta[e, i])
-            y = human_xy[e, i, 1] + speed * dt * math.sin(human_theta[e, i])
-            human_xy[e, i, 0] = min(limit, max(-limit, x))
-            human_xy[e, i, 1] = min(limit, max(-limit, y))
-            gdist = math.hypot(
-                human_goal[e, i, 0] - human_xy[e, i, 0], human_goal[e, i, 1] - human_xy[e, i, 1]
-            )
-            if gdist < goal_reached_distance:
+            x = human_xy[e, i, 0] + speed * dt * human_heading[e, i, 0]
+            y = human_xy[e, i, 1] + speed * dt * human_heading[e, i, 1]
+            x = min(limit, max(-limit, x))
+            y = min(limit, max(-limit, y))
+            human_xy[e, i, 0] = x
+            human_xy[e, i, 1] = y
+            if norm(human_goal[e, i, 0] - x, human_goal[e, i, 1] - y) < (goal_reached_distance):
                 human_goal_index[e, i] += 1
                 gx, gy = draw_human_goal(
                     seed, scenario_id[e], i, human_goal_index[e, i], spawn_half
@@ -220,7 +228,7 @@ class HumanDynamics:
                 state.scenario_id,
                 state.step_count,
                 state.human_xy,
-                state.human_theta,
+                state.human_heading,
                 state.human_speed,
                 state.human_goal,
                 policies,
@@ -285,7 +293,7 @@ class HumanDynamics:
             active,
             velocity,
             state.human_xy,
-            state.human_theta,
+            state.human_heading,
             state.human_speed,
             state.human_goal,
             state.human_goal_index,

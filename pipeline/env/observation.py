@@ -12,6 +12,8 @@ import math
 import numba
 import numpy as np
 
+from pipeline.env.geometry import norm
+
 GOAL_FIELDS = ("goal_x", "goal_y")
 HUMAN_FIELDS = ("x", "y", "sin_rel_heading", "cos_rel_heading", "radius", "rel_speed", "neg_omega")
 
@@ -27,7 +29,7 @@ def observation_names(num_humans: int) -> list[str]:
     ]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def observe(
     robot_xy: np.ndarray,
     robot_theta: np.ndarray,
@@ -35,14 +37,14 @@ def observe(
     robot_omega: np.ndarray,
     goal_xy: np.ndarray,
     human_xy: np.ndarray,
-    human_theta: np.ndarray,
+    human_heading: np.ndarray,
     human_speed: np.ndarray,
     human_radius: float,
     envs: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """Write the observations of slots ``envs`` into the rows ``out[envs]`` (float32)."""
-    num_humans = human_theta.shape[1]
+    num_humans = human_speed.shape[1]
     for n in range(envs.shape[0]):
         e = envs[n]
         theta = robot_theta[e]
@@ -63,11 +65,13 @@ def observe(
             dy = human_xy[e, h, 1] - ry
             out[e, base] = c * dx + s * dy
             out[e, base + 1] = -s * dx + c * dy
-            rel = human_theta[e, h] - theta
-            out[e, base + 2] = math.sin(rel)
-            out[e, base + 3] = math.cos(rel)
+            hc = human_heading[e, h, 0]
+            hs = human_heading[e, h, 1]
+            # sin and cos of θ_h − θ_r by the angle-difference identities.
+            out[e, base + 2] = hs * c - hc * s
+            out[e, base + 3] = hc * c + hs * s
             out[e, base + 4] = human_radius
-            hvx = human_speed[e, h] * math.cos(human_theta[e, h])
-            hvy = human_speed[e, h] * math.sin(human_theta[e, h])
-            out[e, base + 5] = math.hypot(hvx - rvx, hvy - rvy)
+            hvx = human_speed[e, h] * hc
+            hvy = human_speed[e, h] * hs
+            out[e, base + 5] = norm(hvx - rvx, hvy - rvy)
             out[e, base + 6] = -robot_omega[e]

@@ -89,6 +89,8 @@ class EnvParams:
                 raise ValueError(f"env.{f.name}: expected a number, got {value!r}")
             if f.type == "int" and not float(value).is_integer():
                 raise ValueError(f"env.{f.name}: expected an integer, got {value!r}")
+            if f.type == "bool" and not isinstance(value, bool):
+                raise ValueError(f"env.{f.name}: expected true or false, got {value!r}")
             if f.type == "float" and not math.isfinite(value):
                 raise ValueError(f"env.{f.name}: must be finite, got {value!r}")
         if self.human_policy not in HUMAN_POLICIES:
@@ -101,17 +103,19 @@ class EnvParams:
                 f"env.reward: must be one of {', '.join(REWARD_KINDS)}, got {self.reward!r}"
             )
         positive = (
-            "room_size dt max_steps robot_radius robot_max_speed robot_max_rotation goal_radius "
-            "human_radius human_max_speed orca_neighbor_dist orca_max_neighbors "
-            "orca_time_horizon orca_time_horizon_obst sfm_wall_range sfm_gamma"
-        ).split()
+            "room_size", "dt", "max_steps", "robot_radius", "robot_max_speed",
+            "robot_max_rotation", "goal_radius", "human_radius", "human_max_speed",
+            "orca_neighbor_dist", "orca_max_neighbors", "orca_time_horizon",
+            "orca_time_horizon_obst", "sfm_wall_range", "sfm_gamma",
+        )  # fmt: skip
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"env.{name}: must be > 0, got {getattr(self, name)!r}")
         non_negative = (
-            "num_humans wall_thickness spawn_margin human_goal_radius human_speed_threshold "
-            "min_goal_distance discomfort_distance discomfort_factor"
-        ).split()
+            "num_humans", "wall_thickness", "spawn_margin", "human_goal_radius",
+            "human_speed_threshold", "min_goal_distance", "discomfort_distance",
+            "discomfort_factor",
+        )  # fmt: skip
         for name in non_negative:
             if getattr(self, name) < 0:
                 raise ValueError(f"env.{name}: must be >= 0, got {getattr(self, name)!r}")
@@ -125,7 +129,9 @@ class EnvParams:
                 f"{self.spawn_margin} leaves no room to spawn anything"
             )
         if self.spawn_half_size > self.wall_half_size:
-            raise ValueError("env.spawn_margin: must be >= wall_thickness (spawns inside the walls)")
+            raise ValueError(
+                "env.spawn_margin: must be >= wall_thickness (spawns inside the walls)"
+            )
         if self.min_goal_distance >= 2 * math.sqrt(2) * self.spawn_half_size:
             raise ValueError(
                 f"env.min_goal_distance: {self.min_goal_distance} m cannot fit in the spawn area"

@@ -11,6 +11,8 @@ import math
 import numba
 import numpy as np
 
+from pipeline.env.geometry import norm
+
 REWARD_PAPER = 0
 REWARD_DENSE = 1
 REWARD_CODES = {"paper": REWARD_PAPER, "dense": REWARD_DENSE}
@@ -23,20 +25,20 @@ def point_to_segment_distance(ax: float, ay: float, bx: float, by: float) -> flo
     dy = by - ay
     length_sq = dx * dx + dy * dy
     if length_sq == 0.0:
-        return math.hypot(ax, ay)
+        return norm(ax, ay)
     u = -(ax * dx + ay * dy) / length_sq
     u = min(1.0, max(0.0, u))
-    return math.hypot(ax + u * dx, ay + u * dy)
+    return norm(ax + u * dx, ay + u * dy)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def compute_dmin(
     robot_xy: np.ndarray,
     robot_theta: np.ndarray,
     robot_v: np.ndarray,
     robot_omega: np.ndarray,
     human_xy: np.ndarray,
-    human_theta: np.ndarray,
+    human_heading: np.ndarray,
     human_speed: np.ndarray,
     robot_radius: float,
     human_radius: float,
@@ -51,7 +53,7 @@ def compute_dmin(
     original code's: it adds ω as a heading offset (paper_spec §8.10); we keep it because the
     reward must be the paper's, and it changes dmin by millimetres.
     """
-    num_envs, num_humans = human_theta.shape
+    num_envs, num_humans = human_speed.shape
     for e in range(num_envs):
         heading = robot_theta[e] + robot_omega[e] * dt
         rvx = robot_v[e] * math.cos(heading)
@@ -60,15 +62,15 @@ def compute_dmin(
         for h in range(num_humans):
             px = human_xy[e, h, 0] - robot_xy[e, 0]
             py = human_xy[e, h, 1] - robot_xy[e, 1]
-            ux = human_speed[e, h] * math.cos(human_theta[e, h]) - rvx
-            uy = human_speed[e, h] * math.sin(human_theta[e, h]) - rvy
+            ux = human_speed[e, h] * human_heading[e, h, 0] - rvx
+            uy = human_speed[e, h] * human_heading[e, h, 1] - rvy
             d = point_to_segment_distance(px, py, px + ux * dt, py + uy * dt)
             d -= robot_radius + human_radius
             best = min(best, d)
         out[e] = best
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def compute_reward(
     kind: int,
     active: np.ndarray,

@@ -1,4 +1,4 @@
-"""Scenarios: seeded spawning of robot, goal and humans, and the random draws made during an episode.
+"""Scenarios: seeded spawning of robot, goal and humans, and the random draws of an episode.
 
 Every random number of the simulator is a pure function of ``(seed, scenario_id, stream, i, j)``
 (a counter-based generator: SplitMix64 hashing, no hidden state). So scenario ``i`` of a seed is
@@ -13,6 +13,8 @@ import math
 
 import numba
 import numpy as np
+
+from pipeline.env.geometry import norm
 
 # Streams: which quantity a draw is for. Changing these values changes every scenario.
 STREAM_ROBOT = 1  # robot position (i = attempt) and heading
@@ -54,7 +56,7 @@ def uniform(seed: int, scenario: int, stream: int, i: int, j: int, k: int) -> fl
     return float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def uniform_array(seed: int, scenario: np.ndarray, stream: int, i: int, j: int, k: int):
     """`uniform` for an array of scenario ids (used by tests and by numpy-side code)."""
     out = np.empty(scenario.shape[0])
@@ -73,7 +75,7 @@ def draw_human_goal(
     return gx, gy
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def spawn(
     envs: np.ndarray,
     seed: int,
@@ -88,7 +90,7 @@ def spawn(
     robot_theta: np.ndarray,
     goal_xy: np.ndarray,
     human_xy: np.ndarray,
-    human_theta: np.ndarray,
+    human_heading: np.ndarray,
     human_speed: np.ndarray,
     human_goal: np.ndarray,
     human_goal_index: np.ndarray,
@@ -115,7 +117,7 @@ def spawn(
         for attempt in range(MAX_SPAWN_ATTEMPTS):
             gx = (2.0 * uniform(seed, s, STREAM_ROBOT_GOAL, attempt, 0, 0) - 1.0) * half
             gy = (2.0 * uniform(seed, s, STREAM_ROBOT_GOAL, attempt, 0, 1) - 1.0) * half
-            if math.hypot(gx - robot_xy[e, 0], gy - robot_xy[e, 1]) > min_goal_distance:
+            if norm(gx - robot_xy[e, 0], gy - robot_xy[e, 1]) > min_goal_distance:
                 goal_xy[e, 0] = gx
                 goal_xy[e, 1] = gy
                 placed = True
@@ -127,11 +129,9 @@ def spawn(
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 hx = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 0) - 1.0) * half
                 hy = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 1) - 1.0) * half
-                ok = math.hypot(hx - robot_xy[e, 0], hy - robot_xy[e, 1]) > (
-                    robot_radius + human_radius
-                )
+                ok = norm(hx - robot_xy[e, 0], hy - robot_xy[e, 1]) > (robot_radius + human_radius)
                 for other in range(h):
-                    if ok and math.hypot(hx - human_xy[e, other, 0], hy - human_xy[e, other, 1]) <= (
+                    if ok and norm(hx - human_xy[e, other, 0], hy - human_xy[e, other, 1]) <= (
                         2.0 * human_radius
                     ):
                         ok = False
@@ -143,7 +143,9 @@ def spawn(
             if not placed:
                 failures += 1
             human_speed[e, h] = uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 0) * human_max_speed
-            human_theta[e, h] = (2.0 * uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 1) - 1.0) * math.pi
+            heading = (2.0 * uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 1) - 1.0) * math.pi
+            human_heading[e, h, 0] = math.cos(heading)
+            human_heading[e, h, 1] = math.sin(heading)
             gx, gy = draw_human_goal(seed, s, h, 0, half)
             human_goal[e, h, 0] = gx
             human_goal[e, h, 1] = gy

@@ -1,5 +1,9 @@
 """The simulator's state: plain arrays with a leading ``num_envs`` axis.
 
+Headings of humans are stored as unit vectors rather than angles: every consumer (forces,
+observation, dmin) needs cos and sin, and computing them once per move instead of in every
+kernel is a large part of the simulator's speed.
+
 A single environment is a batch of one; nothing in the simulator holds per-env Python objects.
 World frame: origin at the room centre, x right, y up, angles counter-clockwise from +x.
 """
@@ -27,7 +31,7 @@ class BatchState:
     goal_xy: np.ndarray  # (N, 2) m
     start_xy: np.ndarray  # (N, 2) robot position at reset, m
     human_xy: np.ndarray  # (N, H, 2) m
-    human_theta: np.ndarray  # (N, H) heading, rad
+    human_heading: np.ndarray  # (N, H, 2) unit heading vectors (cos θ_h, sin θ_h)
     human_speed: np.ndarray  # (N, H) m/s
     human_goal: np.ndarray  # (N, H, 2) m
     human_goal_index: np.ndarray  # (N, H) int64: how many goals the human has drawn so far
@@ -49,7 +53,7 @@ class BatchState:
             goal_xy=np.zeros((n, 2)),
             start_xy=np.zeros((n, 2)),
             human_xy=np.zeros((n, h, 2)),
-            human_theta=np.zeros((n, h)),
+            human_heading=np.tile(np.array([1.0, 0.0]), (n, h, 1)),
             human_speed=np.zeros((n, h)),
             human_goal=np.zeros((n, h, 2)),
             human_goal_index=np.zeros((n, h), dtype=np.int64),
@@ -67,13 +71,15 @@ class BatchState:
 
     @property
     def num_humans(self) -> int:
-        return self.human_theta.shape[1]
+        return self.human_speed.shape[1]
+
+    def human_theta(self) -> np.ndarray:
+        """(N, H) human headings, rad."""
+        return np.arctan2(self.human_heading[..., 1], self.human_heading[..., 0])
 
     def copy(self) -> BatchState:
         return BatchState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
 
     def human_velocity(self) -> np.ndarray:
         """(N, H, 2) world-frame human velocities, m/s."""
-        return self.human_speed[..., None] * np.stack(
-            (np.cos(self.human_theta), np.sin(self.human_theta)), axis=-1
-        )
+        return self.human_speed[..., None] * self.human_heading

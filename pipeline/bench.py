@@ -1,0 +1,118 @@
+"""Benchmarks: speed and memory of the pipeline's hot paths, measured, never asserted.
+
+Each benchmark returns rows (dicts) that ``socnav-wm bench …`` prints as a table. Timings run
+after a warm-up (numba compilation, first allocations), for a fixed wall-clock budget per row,
+pinned to one CPU core where the OS allows it so that numbers from different machines compare.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import tracemalloc
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+ENV_BATCH_SIZES = (1, 64, 1024, 4096)
+ENV_POLICIES = ("sfm", "orca", "mixed")
+
+
+@contextmanager
+def one_core() -> Iterator[str]:
+    """Pin this process to one CPU core for the duration (where the OS supports it)."""
+    if not hasattr(os, "sched_getaffinity"):
+        yield "unpinned"
+        return
+    before = os.sched_getaffinity(0)
+    core = min(before)
+    os.sched_setaffinity(0, {core})
+    try:
+        yield f"core {core}"
+    finally:
+        os.sched_setaffinity(0, before)
+
+
+def _rate(step: Callable[[], int], seconds: float) -> float:
+    """Items per second of ``step`` (which returns how many items it did) over ``seconds``."""
+    done = 0
+    start = time.perf_counter()
+    while True:
+        done += step()
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds:
+            return done / elapsed
+
+
+def _peak_bytes(run: Callable[[], None]) -> int:
+    """Peak traced allocation (numpy arrays included) while ``run`` executes."""
+    tracemalloc.start()
+    try:
+        run()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def bench_env(
+    batch_sizes: tuple[int, ...] = ENV_BATCH_SIZES,
+    policies: tuple[str, ...] = ENV_POLICIES,
+    seconds: float = 2.0,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """Env-steps per second of random-action stepping, with autoreset, no rendering.
+
+    Batch 1 goes through ``gym.make("SocNav-v0")`` (with gymnasium's default wrappers: what a
+    user of the single env gets); larger batches through ``gym.make_vec("SocNav-v0", N)``.
+    """
+    import gymnasium as gym
+
+    import pipeline.env  # noqa: F401  (registers SocNav-v0)
+
+    rows = []
+    for policy in policies:
+        for n in batch_sizes:
+            rng = np.random.default_rng(seed)
+            if n == 1:
+                env = gym.make("SocNav-v0", human_policy=policy)
+                env.reset(seed=seed)
+                actions = rng.integers(0, 4, size=4096)
+                cursor = [0]
+
+                def step(env=env, actions=actions, cursor=cursor) -> int:
+                    _, _, terminated, truncated, _ = env.step(int(actions[cursor[0] % 4096]))
+                    cursor[0] += 1
+                    if terminated or truncated:
+                        env.reset()
+                    return 1
+
+                interface = "gym.make"
+            else:
+                env = gym.make_vec("SocNav-v0", num_envs=n, human_policy=policy)
+                env.reset(seed=seed)
+                actions = rng.integers(0, 4, size=(16, n))
+                cursor = [0]
+
+                def step(env=env, actions=actions, cursor=cursor, n=n) -> int:
+                    env.step(actions[cursor[0] % 16])
+                    cursor[0] += 1
+                    return n
+
+                interface = "gym.make_vec"
+            for _ in range(20):  # warm-up: compilation, caches
+                step()
+            rate = _rate(step, seconds)
+            peak = _peak_bytes(lambda step=step: [step() for _ in range(20)])
+            rows.append(
+                {
+                    "humans": policy,
+                    "batch": n,
+                    "interface": interface,
+                    "steps_per_s": rate,
+                    "peak_mb": peak / 2**20,
+                }
+            )
+            env.close()
+    return rows

@@ -1,0 +1,115 @@
+"""The gymnasium front-ends: registration, check_env, the vector env and option validation."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import pipeline.env  # noqa: F401  (registers SocNav-v0)
+from pipeline.env.gym import SocNavEnv, SocNavVectorEnv
+
+
+def test_make_passes_gymnasiums_env_checker() -> None:
+    env = gym.make("SocNav-v0")
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (23,) and obs.dtype == np.float32
+    assert env.action_space == gym.spaces.Discrete(4)
+    assert {"robot_xy", "human_xy", "scenario_id"} <= set(info)
+
+
+def test_continuous_action_type_passes_the_checker() -> None:
+    env = gym.make("SocNav-v0", action_type="continuous")
+    check_env(env.unwrapped, skip_render_check=True)
+    np.testing.assert_allclose(env.action_space.high, [0.14, 0.387596899])
+
+
+def test_step_info_carries_what_metrics_need() -> None:
+    env = gym.make("SocNav-v0")
+    env.reset(seed=3)
+    _, reward, terminated, truncated, info = env.step(1)
+    assert isinstance(reward, float) and isinstance(terminated, bool)
+    assert info["robot_xy"].shape == (2,) and info["human_xy"].shape == (3, 2)
+    assert info["collision"] in ("none", "human", "wall")
+    assert isinstance(info["dmin"], float) and isinstance(info["success"], bool)
+
+
+def test_single_env_resets_walk_through_the_seeds_scenarios() -> None:
+    env = SocNavEnv()
+    first, _ = env.reset(seed=5)
+    second, info = env.reset()
+    assert info["scenario_id"] == 1
+    again, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(first, again)
+    picked, info = env.reset(options={"scenario_id": 1})
+    np.testing.assert_array_equal(picked, second)
+
+
+def test_make_vec_returns_the_batched_env() -> None:
+    envs = gym.make_vec("SocNav-v0", num_envs=8, human_policy="sfm")
+    assert isinstance(envs.unwrapped, SocNavVectorEnv)
+    obs, info = envs.reset(seed=0)
+    assert obs.shape == (8, 23) and info["robot_xy"].shape == (8, 2)
+    obs, reward, terminated, truncated, info = envs.step(np.ones(8, dtype=np.int64))
+    assert reward.shape == (8,) and terminated.dtype == bool
+
+
+def test_vector_env_autoresets_in_the_same_step() -> None:
+    envs = SocNavVectorEnv(num_envs=4)
+    envs.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        obs, reward, terminated, truncated, info = envs.step(rng.integers(0, 4, 4))
+        ended = terminated | truncated
+        if ended.any():
+            break
+    assert ended.any()
+    assert info["_final_obs"].tolist() == ended.tolist()
+    e = int(np.flatnonzero(ended)[0])
+    assert not np.array_equal(info["final_obs"][e], obs[e])  # obs is the new episode's first
+    assert info["step"][e] == 0 and info["scenario_id"][e] >= 4
+    assert info["final_info"]["step"][e] > 0
+
+
+def test_vector_env_matches_the_single_env_for_the_same_scenario() -> None:
+    single = SocNavEnv()
+    batch = SocNavVectorEnv(num_envs=3)
+    obs_single, _ = single.reset(seed=9, options={"scenario_id": 2})
+    obs_batch, _ = batch.reset(seed=9)
+    np.testing.assert_array_equal(obs_single, obs_batch[2])
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"human_policy": "bogus"}, "env.human_policy: must be one of mixed, sfm, orca"),
+        ({"reward": "sparse"}, "env.reward: must be one of paper, dense"),
+        ({"num_humans": -1}, "env.num_humans: must be >= 0"),
+        ({"num_humans": 2.5}, "env.num_humans: expected an integer"),
+        ({"room_size": 0}, "env.room_size: must be > 0"),
+        ({"human_max_speed": "fast"}, "env.human_max_speed: expected a number"),
+        ({"orca_avoid_robot": "yes"}, "env.orca_avoid_robot: expected true or false"),
+        ({"colour": "red"}, "env: unknown option"),
+        ({"action_type": "joystick"}, "action_type: must be one of discrete, continuous"),
+    ],
+)
+def test_bad_options_are_rejected_with_a_clear_message(options: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        gym.make("SocNav-v0", **options)
+
+
+def test_scenario_parameters_are_options_of_make() -> None:
+    env = gym.make("SocNav-v0", num_humans=5, room_size=12.0, human_policy="orca", reward="dense")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (2 + 7 * 5,)
+    assert env.unwrapped.params.room_size == 12.0
+
+
+def test_render_returns_an_rgb_frame() -> None:
+    env = gym.make("SocNav-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(1)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.shape[2] == 3

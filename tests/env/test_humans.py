@@ -1,0 +1,115 @@
+"""Human motion: SFM behaviour on simple scenes, and invariants over random episodes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.env import EnvParams, Simulator
+from pipeline.env.humans import move_humans
+from pipeline.env.scenario import draw_human_goal
+
+STOP = 0
+
+
+def _one_human(policy: str, xy, goal, **params) -> Simulator:
+    sim = Simulator(
+        1, EnvParams(num_humans=1, human_policy=policy, sfm_avoid_robot_prob=0.0, **params)
+    )
+    sim.reset(seed=0)
+    s = sim.state
+    s.robot_xy[0] = (-4.0, -4.0)
+    s.goal_xy[0] = (4.0, 4.0)
+    s.human_xy[0, 0] = xy
+    s.human_goal[0, 0] = goal
+    s.human_speed[0, 0] = 0.0
+    return sim
+
+
+def test_lone_sfm_human_walks_straight_to_its_goal_at_a_weighted_speed() -> None:
+    sim = _one_human("sfm", (0.0, 0.0), (3.0, 0.0))
+    sim.step(np.array([STOP]))
+    np.testing.assert_allclose(sim.state.human_xy[0, 0], [0.14 / np.sqrt(3), 0.0], atol=1e-12)
+    # The SFM desired force is weighted by 1/√3 and m = 1, dt = 1: speed 0.14/√3 ≈ 0.081 m/s.
+    assert sim.state.human_speed[0, 0] == pytest.approx(0.14 / np.sqrt(3), rel=1e-12)
+
+
+def test_lone_orca_human_walks_straight_to_its_goal_at_full_speed() -> None:
+    sim = _one_human("orca", (0.0, 0.0), (3.0, 0.0))
+    sim.step(np.array([STOP]))
+    np.testing.assert_allclose(sim.state.human_xy[0, 0], [0.14, 0.0], atol=1e-6)
+
+
+def test_sfm_walls_push_a_human_back_inside() -> None:
+    # 0.02 m from the right wall, walking along it: the wall force pushes it inwards.
+    sim = _one_human("sfm", (4.8 - 0.36 - 0.02, 0.0), (4.4, 3.0))
+    sim.step(np.array([STOP]))
+    assert sim.state.human_xy[0, 0, 0] < 4.8 - 0.36 - 0.02
+
+
+def test_sfm_humans_facing_each_other_deflect() -> None:
+    sim = Simulator(1, EnvParams(num_humans=2, human_policy="sfm", sfm_avoid_robot_prob=0.0))
+    sim.reset(seed=0)
+    s = sim.state
+    s.robot_xy[0] = (-4.0, -4.0)
+    s.human_xy[0] = [(-0.5, 0.0), (0.5, 0.0)]
+    s.human_goal[0] = [(4.0, 0.0), (-4.0, 0.0)]
+    s.human_speed[0] = 0.1
+    s.human_heading[0] = [(1.0, 0.0), (-1.0, 0.0)]
+    sim.step(np.array([STOP]))
+    # Head-on, the interaction force has a sideways (normal) part: both leave the x axis.
+    assert abs(s.human_xy[0, 0, 1]) > 1e-3 and abs(s.human_xy[0, 1, 1]) > 1e-3
+
+
+def test_a_human_at_its_goal_draws_the_next_goal_of_its_sequence() -> None:
+    sim = _one_human("orca", (1.0, 1.0), (1.05, 1.0))
+    sim.step(np.array([STOP]))
+    s = sim.state
+    assert s.human_goal_index[0, 0] == 1
+    expected = draw_human_goal(sim.seed, int(s.scenario_id[0]), 0, 1, sim.params.spawn_half_size)
+    np.testing.assert_array_equal(s.human_goal[0, 0], expected)
+
+
+def test_speeds_below_the_threshold_stop_the_human() -> None:
+    xy = np.array([[[0.0, 0.0]]])
+    heading = np.array([[[1.0, 0.0]]])
+    speed = np.zeros((1, 1))
+    goal = np.array([[[3.0, 0.0]]])
+    move_humans(
+        0, np.array([0]), np.array([True]), np.array([[[0.0, 0.04]]]), xy, heading, speed, goal,
+        np.zeros((1, 1), dtype=np.int64), 0.05, 4.8, 4.5, 0.36, 0.61, 1.0,
+    )  # fmt: skip
+    assert speed[0, 0] == 0.0
+    np.testing.assert_array_equal(xy[0, 0], [0.0, 0.0])
+    np.testing.assert_allclose(heading[0, 0], [0.0, 1.0])  # the heading still follows v
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    policy=st.sampled_from(["mixed", "sfm", "orca"]),
+    num_humans=st.integers(1, 5),
+    action_seed=st.integers(0, 1000),
+)
+def test_random_episodes_keep_every_invariant(
+    seed: int, policy: str, num_humans: int, action_seed: int
+) -> None:
+    params = EnvParams(num_humans=num_humans, human_policy=policy)
+    sim = Simulator(8, params)
+    sim.reset(seed=seed)
+    rng = np.random.default_rng(action_seed)
+    limit = params.wall_half_size - params.human_radius
+    for _ in range(60):
+        actions = rng.integers(0, 4, size=8)
+        result = sim.step(actions)
+        s = sim.state
+        assert np.all(np.isfinite(s.robot_xy)) and np.all(np.isfinite(s.human_xy))
+        assert np.all(np.isfinite(result.obs)) and np.all(np.isfinite(result.reward))
+        assert np.all(np.abs(s.human_xy) <= limit + 1e-12)
+        assert np.all(np.abs(s.robot_xy) < params.room_size / 2)
+        assert np.all((s.human_speed >= 0) & (s.human_speed <= params.human_max_speed + 1e-9))
+        np.testing.assert_allclose(np.linalg.norm(s.human_heading, axis=-1), 1.0, atol=1e-9)
+        assert np.all(np.abs(s.robot_theta) <= np.pi)
+        sim.reset_envs(result.terminated | result.truncated)

@@ -1,0 +1,52 @@
+"""The typer CLI: help, render and bench env, through typer's CliRunner (real code paths)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PIL import Image
+from typer.testing import CliRunner
+
+from pipeline.cli import app
+
+runner = CliRunner()
+
+
+def test_help_lists_the_commands() -> None:
+    result = runner.invoke(app, ["--help"])
+    assert result.exit_code == 0
+    for command in ("render", "bench"):
+        assert command in result.output
+
+
+def test_render_writes_an_animated_gif(tmp_path: Path) -> None:
+    out = tmp_path / "episode.gif"
+    result = runner.invoke(
+        app, ["render", "--policy", "random", "--episodes", "2", "--out", str(out), "--size", "96"]
+    )
+    assert result.exit_code == 0, result.output
+    with Image.open(out) as gif:
+        assert gif.format == "GIF" and gif.size == (96, 96)
+        assert gif.n_frames > 2
+    assert "wrote" in result.output
+
+
+def test_render_rejects_an_unknown_policy_in_one_line(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["render", "--policy", "genius", "--out", str(tmp_path / "x.gif")])
+    assert result.exit_code == 2
+    assert result.output.strip() == "error: --policy: unknown policy 'genius' (available: random)"
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_bench_env_prints_a_table() -> None:
+    result = runner.invoke(
+        app, ["bench", "env", "--batch", "1", "--batch", "8", "--humans", "sfm", "--seconds", "0.1"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "steps_per_s" in result.output and "gym.make_vec" in result.output
+
+
+def test_bench_env_rejects_an_unknown_human_policy() -> None:
+    result = runner.invoke(app, ["bench", "env", "--humans", "robots"])
+    assert result.exit_code == 2
+    assert "--humans: must be one of sfm, orca, mixed" in result.output
