@@ -1,0 +1,137 @@
+"""Atomic outputs: a stage's file is either the old one or the complete new one, never half.
+
+Writers get a temporary path in the target's directory (same filesystem, so the final
+``os.replace`` is atomic); on success the data is fsynced and renamed over the target, on error
+the temporary is deleted and the target is left untouched. A process killed mid-write leaves at
+most a hidden ``.name.tmp-<pid>-<random>`` file, which no reader (or DVC) takes for the output.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import secrets
+import shutil
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+__all__ = ["atomic_path", "write_bytes_atomic", "write_json_atomic", "write_text_atomic"]
+
+
+def _temp_sibling(target: Path, kind: str) -> Path:
+    # The target's suffix is kept at the end because some writers pick the format from it
+    # (matplotlib's savefig, PIL's save): `.vae.pt.tmp-123-9f2c.pt`.
+    return target.with_name(
+        f".{target.name}.{kind}-{os.getpid()}-{secrets.token_hex(4)}{target.suffix}"
+    )
+
+
+def _fsync_path(path: Path) -> None:
+    """Flush a file, or a directory tree's files and directories, to disk."""
+    if path.is_dir():
+        for root, _dirs, files in os.walk(path):
+            for name in files:
+                _fsync_path(Path(root) / name)
+            _fsync_dir(Path(root))
+        return
+    with open(path, "rb") as handle:
+        os.fsync(handle.fileno())
+
+
+def _fsync_dir(directory: Path) -> None:
+    # Makes the rename itself durable. Not possible on every platform (Windows): best effort.
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success it replaces ``path``.
+
+    Write a file at the yielded path (or create a directory there: a directory replaces the
+    target directory as a whole, e.g. a folder of Parquet shards). Parent directories are
+    created. If the block raises, the temporary is removed and ``path`` keeps its old content.
+
+    >>> with atomic_path("metrics/vae.json") as tmp:
+    ...     tmp.write_text("{}")
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _temp_sibling(target, "tmp")
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise FileNotFoundError(f"atomic_path: nothing was written for {target}")
+        _fsync_path(tmp)
+        if tmp.is_dir() and target.exists():
+            # rename() cannot replace a non-empty directory: move the old one aside first, so
+            # the window without a complete target is one rename long, then delete it.
+            old = _temp_sibling(target, "old")
+            os.replace(target, old)
+            try:
+                os.replace(tmp, target)
+            except BaseException:
+                os.replace(old, target)
+                raise
+            _remove(old)
+        else:
+            os.replace(tmp, target)
+        _fsync_dir(target.parent)
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
+    """Write UTF-8 ``text`` to ``path`` atomically."""
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def write_json_atomic(path: str | os.PathLike[str], obj: Any) -> None:
+    """Write ``obj`` as JSON (sorted keys, indent 2, trailing newline) atomically.
+
+    NaN and ±inf become ``null`` (JSON has no such numbers and DVC's metrics reader rejects
+    them); numpy scalars and arrays become plain numbers and lists; paths become strings.
+    """
+    text = json.dumps(_jsonable(obj), sort_keys=True, indent=2, allow_nan=False)
+    write_text_atomic(path, text + "\n")
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, float):  # also numpy.float64, a float subclass
+        return float(value) if math.isfinite(value) else None
+    if value is None or isinstance(value, str | bool | int):
+        return value
+    if isinstance(value, Mapping):
+        return {str(key): _jsonable(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(item) for item in value]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if hasattr(value, "tolist"):  # numpy scalars and arrays, torch tensors
+        return _jsonable(value.tolist())
+    raise TypeError(f"cannot write {type(value).__name__} as JSON: {value!r}")

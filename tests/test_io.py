@@ -1,0 +1,126 @@
+"""Atomic outputs: the target is the old content or the complete new one, never half."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.io import atomic_path, write_bytes_atomic, write_json_atomic, write_text_atomic
+
+
+def test_replaces_the_target_and_leaves_no_temp(tmp_path: Path) -> None:
+    target = tmp_path / "metrics.json"
+    target.write_text("old")
+    with atomic_path(target) as tmp:
+        assert tmp.parent == tmp_path
+        assert tmp.name.startswith(f".metrics.json.tmp-{os.getpid()}-")
+        assert tmp.suffix == ".json"  # writers that read the format from the suffix still work
+        assert not tmp.exists()
+        tmp.write_text("new")
+        assert target.read_text() == "old"  # nothing visible before the block ends
+    assert target.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["metrics.json"]
+
+
+def test_exception_keeps_old_content_and_removes_temp(tmp_path: Path) -> None:
+    target = tmp_path / "model.pt"
+    target.write_bytes(b"old weights")
+    with pytest.raises(RuntimeError, match="boom"), atomic_path(target) as tmp:
+        tmp.write_bytes(b"half of the new weig")
+        raise RuntimeError("boom")
+    assert target.read_bytes() == b"old weights"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.pt"]
+
+
+def test_exception_before_any_write_creates_nothing(tmp_path: Path) -> None:
+    target = tmp_path / "sub" / "out.bin"
+    with pytest.raises(KeyError), atomic_path(target):
+        raise KeyError("x")
+    assert not target.exists()
+    assert list(target.parent.iterdir()) == []
+
+
+def test_creates_parent_directories(tmp_path: Path) -> None:
+    target = tmp_path / "a" / "b" / "c.txt"
+    write_text_atomic(target, "hello")
+    assert target.read_text() == "hello"
+
+
+def test_nothing_written_is_an_error(tmp_path: Path) -> None:
+    target = tmp_path / "out.txt"
+    with pytest.raises(FileNotFoundError, match="nothing was written"), atomic_path(target):
+        pass
+    assert not target.exists()
+
+
+def test_a_directory_replaces_a_directory(tmp_path: Path) -> None:
+    target = tmp_path / "rollouts"
+    target.mkdir()
+    (target / "shard-00000.parquet").write_text("old")
+    (target / "shard-00001.parquet").write_text("old")
+    with atomic_path(target) as tmp:
+        tmp.mkdir()
+        (tmp / "shard-00000.parquet").write_text("new")
+    assert sorted(p.name for p in target.iterdir()) == ["shard-00000.parquet"]
+    assert (target / "shard-00000.parquet").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rollouts"]
+
+
+def test_failed_directory_write_keeps_the_old_directory(tmp_path: Path) -> None:
+    target = tmp_path / "rollouts"
+    target.mkdir()
+    (target / "shard-00000.parquet").write_text("old")
+    with pytest.raises(ValueError), atomic_path(target) as tmp:
+        tmp.mkdir()
+        (tmp / "shard-00000.parquet").write_text("partial")
+        raise ValueError
+    assert (target / "shard-00000.parquet").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rollouts"]
+
+
+def test_write_bytes_atomic(tmp_path: Path) -> None:
+    target = tmp_path / "blob.bin"
+    write_bytes_atomic(target, b"\x00\x01")
+    write_bytes_atomic(target, b"\x02")
+    assert target.read_bytes() == b"\x02"
+
+
+def test_write_json_atomic_sorted_indented_nan_as_null(tmp_path: Path) -> None:
+    target = tmp_path / "metrics" / "vae.json"
+    write_json_atomic(
+        target,
+        {
+            "val_loss": float("nan"),
+            "best": math.inf,
+            "epochs": np.int64(3),
+            "loss": np.float32(0.5),
+            "curve": np.array([1.0, np.nan]),
+            "a": [1, (2, None)],
+        },
+    )
+    text = target.read_text()
+    assert text.endswith("}\n")
+    assert text.index('"a"') < text.index('"best"') < text.index('"val_loss"')
+    assert '\n  "a": [' in text  # indent 2
+    assert json.loads(text) == {
+        "a": [1, [2, None]],
+        "best": None,
+        "curve": [1.0, None],
+        "epochs": 3,
+        "loss": 0.5,
+        "val_loss": None,
+    }
+
+
+def test_write_json_atomic_rejects_unknown_types_and_keeps_old_file(tmp_path: Path) -> None:
+    target = tmp_path / "m.json"
+    write_json_atomic(target, {"ok": 1})
+    with pytest.raises(TypeError):
+        write_json_atomic(target, {"bad": object()})
+    assert json.loads(target.read_text()) == {"ok": 1}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json"]
