@@ -1,0 +1,1 @@
+"""Rollout data: the Parquet schema, shard writer/reader, and LSTM training windows."""

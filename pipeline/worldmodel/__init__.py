@@ -1,0 +1,1 @@
+"""The world model: observation VAE, latent LSTM, and their training."""
