@@ -20,8 +20,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+# dvc runs each stage's `socnav-wm …` command, so the venv's bin goes first on PATH.
 run: $(STAMP)
-	$(BIN)/socnav-wm render --policy random --episodes 3 --out episode.gif
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
 
 test: $(STAMP)
 	$(BIN)/ruff check .

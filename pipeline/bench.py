@@ -116,3 +116,40 @@ def bench_env(
             )
             env.close()
     return rows
+
+
+def bench_collect(
+    episodes: int = 2000, num_envs: tuple[int, ...] = (256, 512), seed: int = 0
+) -> list[dict[str, Any]]:
+    """End-to-end speed of the collect stage: simulation, buffering and Parquet writing."""
+    import tempfile
+    from pathlib import Path
+
+    from pipeline.data.collect import collect_rollouts
+    from pipeline.env.params import EnvParams
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        # Warm-up: compiled kernels and pyarrow's first-use costs are not part of the rate.
+        collect_rollouts(
+            EnvParams(), episodes=8, num_envs=8, seed=seed, out_dir=Path(tmp) / "warm",
+            max_rows_per_shard=400_000,
+        )  # fmt: skip
+        for n in num_envs:
+            out = Path(tmp) / f"n{n}"
+            summary = collect_rollouts(
+                EnvParams(), episodes=episodes, num_envs=n, seed=seed, out_dir=out,
+                max_rows_per_shard=400_000,
+            )  # fmt: skip
+            size = sum(path.stat().st_size for path in summary.shards)
+            rows.append(
+                {
+                    "episodes": summary.episodes,
+                    "num_envs": n,
+                    "steps": summary.steps,
+                    "seconds": summary.seconds,
+                    "steps_per_s": summary.steps / summary.seconds,
+                    "parquet_mb": size / 2**20,
+                }
+            )
+    return rows

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import functools
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -35,8 +36,11 @@ class UserError(Exception):
 
 
 def _expected_errors() -> tuple[type[BaseException], ...]:
-    errors: list[type[BaseException]] = [UserError, ValueError, FileNotFoundError]
-    return tuple(errors)
+    # ConfigError, RolloutError and ModelFileError are ValueErrors; tracking.py imports mlflow
+    # only when a run starts, so importing it here is cheap.
+    from pipeline.tracking import TrackingError
+
+    return (UserError, ValueError, FileNotFoundError, TrackingError)
 
 
 def friendly_errors(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -67,6 +71,231 @@ def _print_table(rows: list[dict[str, Any]], title: str, formats: dict[str, str]
             *(format(row[c], formats[c]) if c in formats else str(row[c]) for c in columns)
         )
     Console().print(table)
+
+
+# --------------------------------------------------------------------------- stage plumbing
+ParamsOption = Annotated[
+    Path, typer.Option("--params", help="Parameters file (YAML), relative to the working dir.")
+]
+SetOption = Annotated[
+    list[str] | None,
+    typer.Option("--set", help="Override a parameter: section.key=value (repeatable)."),
+]
+NoTrackingOption = Annotated[
+    bool, typer.Option("--no-tracking", help="Do not record an MLflow run.")
+]
+QuietOption = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
+DeviceOption = Annotated[
+    str | None,
+    typer.Option(help="auto, cpu or cuda; overrides the stage's `device` parameter."),
+]
+
+
+@contextmanager
+def _stage(
+    name: str, params_path: Path, overrides: list[str] | None, no_tracking: bool, sections: tuple
+) -> Iterator[tuple[Any, Any]]:
+    """Load and validate the params, then open the stage's MLflow run (checked before work)."""
+    from pipeline.config import load_params, params_dict
+    from pipeline.tracking import stage_run
+
+    params = load_params(params_path, overrides or [])
+    logged = {key: value for key, value in params_dict(params).items() if key in sections}
+    with stage_run(name, logged, enabled=not no_tracking) as run:
+        yield params, run
+
+
+def _with_device(params: Any, section: str, device: str | None) -> Any:
+    if device is None:
+        return params
+    if device not in ("auto", "cpu", "cuda"):
+        raise UserError(f"--device: must be one of auto, cpu, cuda, got {device!r}")
+    updated = getattr(params, section).model_copy(update={"device": device})
+    return params.model_copy(update={section: updated})
+
+
+def _config_path(output: Path) -> Path:
+    """Where a stage saves its resolved configuration: beside its main output."""
+    return (
+        output.with_name(output.stem + ".params.yaml") if output.suffix else output / "params.yaml"
+    )
+
+
+# --------------------------------------------------------------------------- stages
+@app.command()
+@friendly_errors
+def collect(
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    out: Annotated[Path, typer.Option(help="Directory of Parquet shards.")] = Path("data/rollouts"),
+    metrics: Annotated[Path, typer.Option(help="Summary metrics (JSON).")] = Path(
+        "metrics/collect.json"
+    ),
+    no_tracking: NoTrackingOption = False,
+    quiet: QuietOption = False,
+) -> None:
+    """Random-policy rollouts of the simulator into Parquet shards (stage `collect`)."""
+    from pipeline.config import save_resolved
+    from pipeline.data.collect import collect_rollouts
+    from pipeline.io import atomic_path, write_json_atomic
+    from pipeline.progress import progress
+
+    with _stage("collect", params_path, overrides, no_tracking, ("seed", "env", "collect")) as (
+        params,
+        run,
+    ):
+        c = params.collect
+        # The whole directory appears at once: a killed run never leaves a partial dataset.
+        with (
+            atomic_path(out) as staging,
+            progress(c.episodes, "collect", quiet=quiet, unit="episodes") as bar,
+        ):
+            summary = collect_rollouts(
+                params.env,
+                episodes=c.episodes,
+                num_envs=c.num_envs,
+                seed=params.seed,
+                out_dir=staging,
+                max_rows_per_shard=c.max_rows_per_shard,
+                on_episodes=bar.advance,
+            )
+            save_resolved(params, staging / "params.yaml")
+        write_json_atomic(metrics, summary.as_metrics())
+        run.log_metrics(summary.as_metrics())
+        run.log_artifact(out / "params.yaml")
+    typer.echo(
+        f"wrote {summary.episodes} episodes, {summary.steps} steps in {len(summary.shards)} "
+        f"shard(s) to {out} ({summary.steps / summary.seconds:,.0f} steps/s)"
+    )
+
+
+def _log_summary(run: Any, summary: dict[str, float], history: list[dict[str, float]]) -> None:
+    """Log the final metrics, leaving out the per-epoch series (their curves stay clean)."""
+    per_epoch = set().union(*(row.keys() for row in history))
+    run.log_metrics({key: value for key, value in summary.items() if key not in per_epoch})
+
+
+def _epoch_logger(run: Any, bar: Any) -> Callable[[int, dict[str, float]], None]:
+    def on_epoch(epoch: int, values: dict[str, float]) -> None:
+        run.log_metrics(values, step=epoch)
+        bar.advance()
+        bar.set_postfix(val_loss=values.get("val_loss"))
+
+    return on_epoch
+
+
+@app.command("train-vae")
+@friendly_errors
+def train_vae_command(
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    rollouts: Annotated[Path, typer.Option(help="Directory of rollout shards.")] = Path(
+        "data/rollouts"
+    ),
+    out: Annotated[Path, typer.Option(help="Model file to write.")] = Path("models/vae.pt"),
+    metrics: Annotated[Path, typer.Option(help="Validation metrics (JSON).")] = Path(
+        "metrics/vae.json"
+    ),
+    history: Annotated[Path, typer.Option(help="Per-epoch losses (JSON, for plots).")] = Path(
+        "metrics/vae_history.json"
+    ),
+    device: DeviceOption = None,
+    no_tracking: NoTrackingOption = False,
+    quiet: QuietOption = False,
+) -> None:
+    """Train the VAE (23-d observation → latent) on the rollouts (stage `train-vae`)."""
+    from pipeline.config import save_resolved
+    from pipeline.io import write_json_atomic
+    from pipeline.progress import progress
+    from pipeline.worldmodel.fit import fit_vae
+    from pipeline.worldmodel.training import save_vae
+
+    with _stage("train-vae", params_path, overrides, no_tracking, ("seed", "vae")) as (
+        params,
+        run,
+    ):
+        params = _with_device(params, "vae", device)
+        with progress(params.vae.max_epochs, "train-vae", quiet=quiet, unit="epochs") as bar:
+            fitted = fit_vae(
+                rollouts,
+                params.vae,
+                seed=params.seed,
+                device=params.vae.device,
+                on_epoch=_epoch_logger(run, bar),
+            )
+        result = fitted.result
+        summary = {**result.metrics, **fitted.data}
+        save_vae(out, result, extra={"metrics": summary, "params": params.vae.model_dump()})
+        save_resolved(params, _config_path(out))
+        write_json_atomic(metrics, summary)
+        write_json_atomic(history, result.history)
+        _log_summary(run, summary, result.history)
+        run.log_artifact(out)
+        run.log_artifact(_config_path(out))
+        run.log_figure(fitted.figure(), "figures/reconstruction.png")
+    typer.echo(
+        f"wrote {out}: validation reconstruction MSE {result.metrics['val_recon_mse']:.4f} "
+        f"vs {result.metrics['baseline_mse']:.4f} for the training mean"
+    )
+
+
+@app.command("train-lstm")
+@friendly_errors
+def train_lstm_command(
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    rollouts: Annotated[Path, typer.Option(help="Directory of rollout shards.")] = Path(
+        "data/rollouts"
+    ),
+    vae: Annotated[Path, typer.Option(help="Trained VAE (frozen here).")] = Path("models/vae.pt"),
+    out: Annotated[Path, typer.Option(help="Model file to write.")] = Path("models/lstm.pt"),
+    metrics: Annotated[Path, typer.Option(help="Validation metrics (JSON).")] = Path(
+        "metrics/lstm.json"
+    ),
+    history: Annotated[Path, typer.Option(help="Per-epoch losses (JSON, for plots).")] = Path(
+        "metrics/lstm_history.json"
+    ),
+    device: DeviceOption = None,
+    no_tracking: NoTrackingOption = False,
+    quiet: QuietOption = False,
+) -> None:
+    """Train the LSTM world model on VAE latents of the rollouts (stage `train-lstm`)."""
+    from pipeline.config import save_resolved
+    from pipeline.io import write_json_atomic
+    from pipeline.progress import progress
+    from pipeline.worldmodel.fit import fit_lstm
+    from pipeline.worldmodel.training import save_lstm
+
+    with _stage("train-lstm", params_path, overrides, no_tracking, ("seed", "lstm")) as (
+        params,
+        run,
+    ):
+        params = _with_device(params, "lstm", device)
+        with progress(params.lstm.max_epochs, "train-lstm", quiet=quiet, unit="epochs") as bar:
+            fitted = fit_lstm(
+                rollouts,
+                vae,
+                params.lstm,
+                seed=params.seed,
+                device=params.lstm.device,
+                on_epoch=_epoch_logger(run, bar),
+            )
+        result = fitted.result
+        summary = {**result.metrics, **fitted.metrics, **fitted.data}
+        save_lstm(out, result, extra={"metrics": summary, "params": params.lstm.model_dump()})
+        save_resolved(params, _config_path(out))
+        write_json_atomic(metrics, summary)
+        write_json_atomic(history, result.history)
+        _log_summary(run, summary, result.history)
+        run.log_artifact(out)
+        run.log_artifact(_config_path(out))
+        run.log_figure(fitted.figure(), "figures/latent_predictions.png")
+    m = fitted.metrics
+    typer.echo(
+        f"wrote {out}: 1-step latent MSE {m['one_step_mse']:.4g} "
+        f"(copy-last {m['copy_last_one_step_mse']:.4g}); 2-step {m['two_step_mse']:.4g} "
+        f"(copy-last {m['copy_last_two_step_mse']:.4g})"
+    )
 
 
 # --------------------------------------------------------------------------- render
@@ -128,6 +357,26 @@ def bench_env_command(
         rows,
         f"socnav-wm bench env ({where}, {seconds:g} s per row)",
         {"steps_per_s": ",.0f", "peak_mb": ".1f"},
+    )
+
+
+@bench_app.command("collect")
+@friendly_errors
+def bench_collect_command(
+    episodes: Annotated[int, typer.Option(min=1, help="Episodes per row.")] = 2000,
+    num_envs: Annotated[
+        list[int] | None, typer.Option(help="Batch sizes (repeatable).", min=1)
+    ] = None,
+) -> None:
+    """Env-steps/s of the collect stage end to end, Parquet writing included, one core."""
+    from pipeline.bench import bench_collect, one_core
+
+    with one_core() as where:
+        rows = bench_collect(episodes, tuple(num_envs or (256, 512)))
+    _print_table(
+        rows,
+        f"socnav-wm bench collect ({where})",
+        {"seconds": ".2f", "steps_per_s": ",.0f", "parquet_mb": ".1f"},
     )
 
 

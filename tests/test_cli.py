@@ -50,3 +50,9 @@ def test_bench_env_rejects_an_unknown_human_policy() -> None:
     result = runner.invoke(app, ["bench", "env", "--humans", "robots"])
     assert result.exit_code == 2
     assert "--humans: must be one of sfm, orca, mixed" in result.output
+
+
+def test_bench_collect_prints_a_table() -> None:
+    result = runner.invoke(app, ["bench", "collect", "--episodes", "16", "--num-envs", "8"])
+    assert result.exit_code == 0, result.output
+    assert "steps_per_s" in result.output and "parquet_mb" in result.output

@@ -1,0 +1,67 @@
+"""The collect stage's library function: valid episodes, batch-size independence, summary."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.data.collect import collect_rollouts
+from pipeline.data.shards import column_to_numpy, read_rollouts, validate_episodes
+from pipeline.env import EnvParams
+
+
+def _collect(tmp_path: Path, name: str, num_envs: int, episodes: int = 24, **kwargs):
+    out = tmp_path / name
+    summary = collect_rollouts(
+        EnvParams(), episodes=episodes, num_envs=num_envs, seed=3, out_dir=out,
+        max_rows_per_shard=kwargs.get("max_rows_per_shard", 10_000),
+    )  # fmt: skip
+    return summary, read_rollouts(out)
+
+
+def test_collected_episodes_are_complete_and_never_cross_a_boundary(tmp_path: Path) -> None:
+    summary, table = _collect(tmp_path, "a", num_envs=5, max_rows_per_shard=300)
+    validate_episodes(table)  # t = 0..n−1, is_first/is_last, next_obs == following obs
+    ids = column_to_numpy(table, "episode_id")
+    assert sorted(np.unique(ids)) == list(range(24))
+    assert summary.episodes == 24 and summary.steps == table.num_rows
+    assert len(summary.shards) > 1  # 300-row shards force several files
+    # Exactly one outcome per episode, on its last row.
+    last = column_to_numpy(table, "is_last")
+    outcome = (
+        column_to_numpy(table, "success").astype(int)
+        + (column_to_numpy(table, "collision") > 0)
+        + column_to_numpy(table, "truncated")
+    )
+    assert np.all(outcome[last] == 1) and np.all(outcome[~last] == 0)
+    terminal = column_to_numpy(table, "is_terminal")
+    assert np.all(terminal <= last)
+    rates = (
+        summary.success_rate
+        + summary.human_collision_rate
+        + summary.wall_collision_rate
+        + summary.timeout_rate
+    )
+    assert rates == 1.0
+
+
+def test_the_data_does_not_depend_on_num_envs(tmp_path: Path) -> None:
+    _, small = _collect(tmp_path, "small", num_envs=3)
+    _, large = _collect(tmp_path, "large", num_envs=24)
+
+    def by_episode(table):
+        ids = column_to_numpy(table, "episode_id")
+        order = np.lexsort((column_to_numpy(table, "t"), ids))
+        return {name: column_to_numpy(table, name)[order] for name in ("obs", "action", "reward")}
+
+    a, b = by_episode(small), by_episode(large)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_random_actions_are_uniform_over_the_four_actions(tmp_path: Path) -> None:
+    _, table = _collect(tmp_path, "u", num_envs=16, episodes=64)
+    counts = np.bincount(column_to_numpy(table, "action"), minlength=4)
+    share = counts / counts.sum()
+    assert np.all(np.abs(share - 0.25) < 0.03), share

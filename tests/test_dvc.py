@@ -1,0 +1,79 @@
+"""`dvc repro` of the world-model stages in a temporary copy of the repository, tiny params."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.test_stages import TINY
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _project_files() -> list[str]:
+    """Tracked files plus untracked ones git does not ignore (a work tree under development)."""
+    listed = subprocess.run(
+        ["git", "ls-files", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT, check=True, capture_output=True, text=True,
+    ).stdout.split()  # fmt: skip
+    return [name for name in listed if (ROOT / name).is_file()]
+
+
+@pytest.fixture
+def repo(tmp_path: Path) -> Path:
+    if shutil.which("git") is None:
+        pytest.fail("git is required for the DVC test")
+    copy = tmp_path / "repo"
+    for name in _project_files():
+        target = copy / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / name, target)
+    # DVC needs every params section a stage lists to be present in the file.
+    (copy / "params.yaml").write_text(yaml.safe_dump({**TINY, "env": {"num_humans": 3}}))
+    git = ["git", "-c", "user.name=test", "-c", "user.email=test@example.com"]
+    subprocess.run([*git, "init", "-q"], cwd=copy, check=True)
+    subprocess.run([*git, "add", "-A"], cwd=copy, check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "copy"], cwd=copy, check=True)
+    return copy
+
+
+def _dvc(repo: Path, *args: str) -> str:
+    env = dict(os.environ)
+    bin_dir = str(Path(sys.executable).parent)
+    env["PATH"] = bin_dir + os.pathsep + env.get("PATH", "")
+    env["MLFLOW_TRACKING_URI"] = f"sqlite:///{repo / 'mlflow.db'}"
+    env["DVC_NO_ANALYTICS"] = "1"
+    result = subprocess.run(
+        [str(Path(bin_dir) / "dvc"), *args], cwd=repo, env=env, capture_output=True, text=True
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    return result.stdout + result.stderr
+
+
+def test_dvc_repro_runs_the_world_model_stages_and_reruns_only_what_changed(repo: Path) -> None:
+    _dvc(repo, "repro", "train_lstm")
+    for path in ("data/rollouts", "models/vae.pt", "models/lstm.pt", "metrics/lstm.json"):
+        assert (repo / path).exists(), path
+    lock = yaml.safe_load((repo / "dvc.lock").read_text())
+    assert {"collect", "train_vae", "train_lstm"} <= set(lock["stages"])
+    assert (repo / "mlflow.db").exists()
+
+    assert "Data and pipelines are up to date" in _dvc(repo, "repro", "train_lstm")
+
+    params = yaml.safe_load((repo / "params.yaml").read_text())
+    params["lstm"]["max_epochs"] = 2
+    (repo / "params.yaml").write_text(yaml.safe_dump(params))
+    status = _dvc(repo, "status")
+    assert "train_lstm" in status and "collect" not in status and "train_vae" not in status
+    output = _dvc(repo, "repro", "train_lstm")
+    assert "Running stage 'train_lstm'" in output
+    assert "Running stage 'collect'" not in output and "Running stage 'train_vae'" not in output
+
+    shown = _dvc(repo, "metrics", "show")
+    assert "one_step_mse" in shown and "val_recon_mse" in shown
