@@ -351,7 +351,6 @@ class Simulator:
             "robot_theta": s.robot_theta.copy(),
             "goal_xy": s.goal_xy.copy(),
             "human_xy": s.human_xy.copy(),
-            "human_theta": s.human_theta(),
             "scenario_id": s.scenario_id.copy(),
             "step": s.step_count.copy(),
         }

@@ -154,10 +154,11 @@ def scene_of(sim: Simulator, env: int, trail: np.ndarray | None = None, title: s
 class SocNavVectorEnv(VectorEnv):
     """``num_envs`` rooms stepped together, with same-step autoreset.
 
-    ``info`` holds arrays with a leading ``num_envs`` axis (``robot_xy``, ``human_xy``,
-    ``dmin``, ``success``, ``collision`` codes 0 none / 1 human / 2 wall, ``scenario_id``,
-    ``step``); for envs whose episode ended, ``info["final_obs"]`` and ``info["final_info"]``
-    (masked by ``info["_final_obs"]``) describe the last step before the reset.
+    ``info`` holds arrays with a leading ``num_envs`` axis (``robot_xy``, ``robot_theta``,
+    ``goal_xy``, ``human_xy``, ``dmin``, ``success``, ``collision`` codes 0 none / 1 human /
+    2 wall, ``scenario_id``, ``step``); for envs whose episode ended, ``info["final_obs"]`` and
+    ``info["final_info"]`` (rows masked by ``info["_final_obs"]``) describe the last step before
+    the reset, and the other entries already describe the new episode.
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.SAME_STEP}
@@ -201,16 +202,13 @@ class SocNavVectorEnv(VectorEnv):
         obs = result.obs
         ended = result.terminated | result.truncated
         if ended.any():
-            info["final_obs"] = obs.copy()
-            info["_final_obs"] = ended.copy()
-            info["final_info"] = {key: value.copy() for key, value in info.items()}
+            # The step's arrays are its own copies: the final info can keep them as they are.
+            info["final_info"] = dict(info)
+            info["final_obs"] = obs
+            info["_final_obs"] = ended
             self.sim.reset_envs(ended)
             obs = self.sim.observation
-            fresh = self.sim.info()
-            for key in ("robot_xy", "robot_theta", "goal_xy", "human_xy", "human_theta"):
-                info[key] = fresh[key]
-            info["scenario_id"] = fresh["scenario_id"]
-            info["step"] = fresh["step"]
+            info.update(self.sim.info())
         return obs, result.reward, result.terminated, result.truncated, info
 
     def render(self) -> np.ndarray | None:

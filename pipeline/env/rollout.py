@@ -59,12 +59,14 @@ def run_episodes(
     ids = np.asarray(scenario_ids, dtype=np.int64)
     sim = Simulator(len(ids), params)
     obs, info = sim.reset(seed=seed, scenario_ids=ids)
+    info["human_theta"] = sim.state.human_theta()
     frames = [info]
     steps = []
     while not sim.state.done.all():
         actions = np.asarray(policy(obs))
         result = sim.step(actions)
         obs = result.obs
+        result.info["human_theta"] = sim.state.human_theta()
         frames.append(result.info)
         steps.append((actions, result))
     episodes = []
