@@ -64,6 +64,11 @@ def test_dvc_repro_runs_the_world_model_stages_and_reruns_only_what_changed(repo
     assert {"collect", "train_vae", "train_lstm"} <= set(lock["stages"])
     assert (repo / "mlflow.db").exists()
 
+    # Compiled-kernel and bytecode caches appearing next to the code change no stage.
+    cache = repo / "pipeline/env/__pycache__"
+    cache.mkdir(exist_ok=True)
+    (cache / "core.step-1.py311.nbi").write_bytes(b"numba index")
+    (cache / "core.cpython-311.pyc").write_bytes(b"bytecode")
     assert "Data and pipelines are up to date" in _dvc(repo, "repro", "train_lstm")
 
     params = yaml.safe_load((repo / "params.yaml").read_text())
