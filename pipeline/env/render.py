@@ -18,17 +18,16 @@ still be rendered and looked at. Non-finite coordinates, which cannot be drawn, 
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
+
+from pipeline.io import atomic_path
 
 __all__ = [
     "BACKGROUND_COLOR",
@@ -321,8 +320,8 @@ def _check_frames(frames: Sequence[np.ndarray]) -> list[np.ndarray]:
 def write_gif(frames: Sequence[np.ndarray], path: str | os.PathLike[str], fps: float = 8.0) -> None:
     """Write frames as an animated GIF that loops forever, atomically.
 
-    The GIF is written to a temporary file in the destination directory (created if missing)
-    and moved into place with :func:`os.replace`, so readers never see a half-written file.
+    Written through :func:`pipeline.io.atomic_path` (temporary file beside the target, then
+    ``os.replace``), so readers never see a half-written file.
 
     Args:
         frames: equal-shape ``(h, w, 3)`` ``uint8`` RGB frames.
@@ -338,26 +337,16 @@ def write_gif(frames: Sequence[np.ndarray], path: str | os.PathLike[str], fps: f
     if not (math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a finite number > 0, got {fps}")
     duration_ms = max(10, round(1000.0 / fps / 10.0) * 10)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     images = _to_palette_images(frames)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            images[0].save(
-                fh,
-                format="GIF",
-                save_all=True,
-                append_images=images[1:],
-                duration=duration_ms,
-                loop=0,  # 0 = loop forever
-            )
-        os.replace(tmp_name, path)
-    except BaseException:
-        # Never leave a stray temp file behind, whatever went wrong.
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp_name)
-        raise
+    with atomic_path(path) as tmp:
+        images[0].save(
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=duration_ms,
+            loop=0,  # 0 = loop forever
+        )
 
 
 def _rgb_codes(rgb: np.ndarray) -> np.ndarray:
