@@ -24,12 +24,14 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from pipeline.agents.params import AgentParams
 from pipeline.env.params import EnvParams
 from pipeline.io import atomic_path
 
 Device = Literal["auto", "cpu", "cuda"]
 
 __all__ = [
+    "AgentParams",
     "CollectParams",
     "ConfigError",
     "Device",
@@ -120,6 +122,27 @@ class LstmParams(BaseModel):
 
 
 _ENV_TYPES: dict[str, Any] = typing.get_type_hints(EnvParams)
+_AGENT_TYPES: dict[str, Any] = typing.get_type_hints(AgentParams)
+
+
+def _check_agent_types(value: Any) -> Any:
+    """Strict YAML types for the ``agent`` section (a stdlib dataclass cannot be strict)."""
+    if not isinstance(value, Mapping):
+        return value
+    for name, given in value.items():
+        expected = _AGENT_TYPES.get(name)
+        if expected is bool and not isinstance(given, bool):
+            raise ValueError(f"agent.{name}: expected true or false, got {given!r}")
+        if expected is int and (isinstance(given, bool) or not isinstance(given, int)):
+            raise ValueError(f"agent.{name}: expected an integer, got {given!r}")
+        if expected is float and (isinstance(given, bool) or not isinstance(given, int | float)):
+            raise ValueError(f"agent.{name}: expected a number, got {given!r}")
+        if typing.get_origin(expected) is Literal and not isinstance(given, str):
+            choices = ", ".join(map(str, typing.get_args(expected)))
+            raise ValueError(f"agent.{name}: must be one of {choices}, got {given!r}")
+        if typing.get_origin(expected) is tuple and not isinstance(given, list | tuple):
+            raise ValueError(f"agent.{name}: expected a list, got {given!r}")
+    return value
 
 
 class Params(BaseModel):
@@ -137,6 +160,13 @@ class Params(BaseModel):
     """VAE training."""
     lstm: LstmParams = Field(default_factory=LstmParams)
     """LSTM world-model training."""
+    agent: AgentParams = Field(default_factory=AgentParams)
+    """The Dueling DQN agents (all five variants); see pipeline/agents/params.py."""
+
+    @field_validator("agent", mode="before")
+    @classmethod
+    def _agent_types_are_strict(cls, value: Any) -> Any:
+        return _check_agent_types(value)
 
     @field_validator("env", mode="before")
     @classmethod

@@ -275,7 +275,7 @@ def test_save_resolved_round_trip(tmp_path: Path) -> None:
 
 def test_params_dict_is_plain_and_json_able() -> None:
     data = params_dict(Params())
-    assert list(data) == ["seed", "env", "collect", "vae", "lstm"]
+    assert list(data) == ["seed", "env", "collect", "vae", "lstm", "agent"]
     assert data["env"]["human_policy"] == "mixed"
     assert json.loads(json.dumps(data)) == data
 
@@ -286,3 +286,39 @@ def test_flatten_uses_dotted_keys() -> None:
     assert flat["env.num_humans"] == 3
     assert flat["seed"] == 0
     assert flatten({"a": {"b": {"c": 1}, "d": {}}}) == {"a.b.c": 1, "a.d": {}}
+
+
+# --- the agent section (pipeline/agents/params.py) ----------------------------------------------
+
+
+def test_agent_section_shares_the_library_dataclass(tmp_path: Path) -> None:
+    from pipeline.agents.params import AgentParams
+
+    params = load_params(
+        write(tmp_path, "agent:\n  gamma: 0.95\n  trunk_sizes: [128, 128]\n"),
+        ["agent.preset=paper", "agent.learning_rate=1e-3"],
+    )
+    assert isinstance(params.agent, AgentParams)
+    assert params.agent == AgentParams(
+        gamma=0.95, trunk_sizes=(128, 128), preset="paper", learning_rate=1e-3
+    )
+    assert load_params(write(tmp_path, "")).agent == AgentParams()
+    resolved = tmp_path / "resolved.yaml"
+    save_resolved(params, resolved)
+    assert load_params(resolved) == params
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("agent:\n  gamma: 1.5\n", "agent.gamma: must be in [0, 1], got 1.5"),
+        ("agent:\n  episodes: 1.5\n", "agent.episodes: expected an integer, got 1.5"),
+        ("agent:\n  huber: 1\n", "agent.huber: expected true or false, got 1"),
+        ("agent:\n  preset: fast\n", "agent.preset: must be one of shared, paper, got 'fast'"),
+        ("agent:\n  trunk_sizes: 5\n", "agent.trunk_sizes: expected a list, got 5"),
+        ("agent:\n  gama: 0.9\n", "unknown key 'agent.gama' (did you mean 'agent.gamma'?)"),
+    ],
+)
+def test_agent_section_errors(tmp_path: Path, text: str, expected: str) -> None:
+    path = write(tmp_path, text)
+    assert error_of(path) == f"{path}: {expected}"

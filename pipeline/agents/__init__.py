@@ -1,0 +1,36 @@
+"""The Dueling DQN agents: the Q-network, what each variant feeds it, replay and training.
+
+Modules: ``params`` (hyper-parameters and variant names; no torch), ``dueling`` (the network),
+``features`` (the five variants), ``replay`` (uniform replay buffer), ``dqn`` (training loop,
+checkpoints, agent files, evaluation, benchmark).
+
+The names below are imported lazily, so ``from pipeline.agents.params import AgentParams`` (what
+the configuration does) does not pay for importing torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "AgentParams": "pipeline.agents.params",
+    "VARIANT_NAMES": "pipeline.agents.params",
+    "Agent": "pipeline.agents.dqn",
+    "TrainResult": "pipeline.agents.dqn",
+    "bench_train": "pipeline.agents.dqn",
+    "evaluate_agent": "pipeline.agents.dqn",
+    "load_agent": "pipeline.agents.dqn",
+    "save_agent": "pipeline.agents.dqn",
+    "train_agent": "pipeline.agents.dqn",
+    "VARIANTS": "pipeline.agents.features",
+    "make_variant": "pipeline.agents.features",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'pipeline.agents' has no attribute {name!r}")
