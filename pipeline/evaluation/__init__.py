@@ -1,0 +1,1 @@
+"""Evaluation of every method on shared test scenarios, and the statistics of the report."""

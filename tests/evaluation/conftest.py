@@ -1,0 +1,108 @@
+"""Fixtures for the evaluation tests: the two baselines evaluated once per session on a few short
+test scenarios, and helpers to build agent files and synthetic evaluations without training."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from pipeline.env.params import EnvParams
+from pipeline.evaluation.evaluate import EvaluationResult, evaluate_method
+
+# Short episodes (80 steps) so that some time out: every outcome path gets exercised.
+TEST_ENV = EnvParams(max_steps=80)
+SCENARIO_SEED = 11
+EPISODES = 6
+
+
+@pytest.fixture(scope="session")
+def baseline_results() -> dict[str, EvaluationResult]:
+    """ORCA and SFM evaluated on scenarios 0..5 of SCENARIO_SEED (real simulator, real code)."""
+    return {
+        method: evaluate_method(
+            method, env_params=TEST_ENV, scenario_seed=SCENARIO_SEED, episodes=EPISODES
+        )
+        for method in ("orca", "sfm")
+    }
+
+
+def relabel(result: EvaluationResult, method: str, seeds: tuple[int, ...]) -> EvaluationResult:
+    """A synthetic evaluation of ``method``: ``result``'s episodes copied once per seed.
+
+    Used to stand in for a trained agent in report tests; the caller changes metric columns to
+    taste with :func:`set_column`.
+    """
+
+    def copies(table: pa.Table) -> pa.Table:
+        parts = []
+        for seed in seeds:
+            part = table.set_column(
+                table.column_names.index("method"), "method", pa.array([method] * table.num_rows)
+            )
+            part = part.set_column(
+                part.column_names.index("training_seed"),
+                "training_seed",
+                pa.array(np.full(table.num_rows, seed, dtype=np.int64)),
+            )
+            parts.append(part)
+        return pa.concat_tables(parts)
+
+    return EvaluationResult(
+        method=method,
+        scenario_seed=result.scenario_seed,
+        num_scenarios=result.num_scenarios,
+        env_params=result.env_params,
+        training_seeds=seeds,
+        episodes=copies(result.episodes),
+        trajectories=copies(result.trajectories),
+        wall_time=0.0,
+        settings={"synthetic": True},
+    )
+
+
+def set_column(table: pa.Table, name: str, values: np.ndarray) -> pa.Table:
+    """``table`` with column ``name`` replaced by float64 ``values``."""
+    return table.set_column(
+        table.column_names.index(name), name, pa.array(np.asarray(values, dtype=np.float64))
+    )
+
+
+def save_tiny_agent(path: Path, variant: str, env_params: EnvParams, seed: int) -> Path:
+    """A random-initialised agent of ``variant`` written with the agents' own ``save_agent``.
+
+    Tiny networks (and a tiny world model for the world-model variants), nothing trained.
+    """
+    import torch
+
+    from pipeline.agents.dqn import TrainResult, env_params_obs_dim, save_agent
+    from pipeline.agents.dueling import DuelingQNetwork
+    from pipeline.agents.features import VARIANTS, make_variant
+    from pipeline.agents.params import AgentParams
+    from tests.agents.conftest import tiny_world_model
+
+    vae = lstm = None
+    if VARIANTS[variant].needs_world_model:
+        vae, lstm = tiny_world_model(seed)
+    params = AgentParams(trunk_sizes=(16,), stream_size=8)
+    features = make_variant(variant, vae, lstm, obs_dim=env_params_obs_dim(env_params))
+    torch.manual_seed(seed)
+    q_network = DuelingQNetwork(features.feature_dim, 4, (16,), 8).eval()
+    result = TrainResult(
+        q_network=q_network,
+        variant=variant,
+        params=params,
+        env_params=env_params,
+        seed=seed,
+        episodes=[],
+        episodes_to_solve=None,
+        env_steps=0,
+        updates=0,
+        wall_time=0.0,
+        vae=vae,
+        lstm=lstm,
+    )
+    save_agent(path, result)
+    return path
