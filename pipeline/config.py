@@ -125,10 +125,29 @@ _ENV_TYPES: dict[str, Any] = typing.get_type_hints(EnvParams)
 _AGENT_TYPES: dict[str, Any] = typing.get_type_hints(AgentParams)
 
 
-def _check_agent_types(value: Any) -> Any:
-    """Strict YAML types for the ``agent`` section (a stdlib dataclass cannot be strict)."""
+def _check_strict_types(section: str, hints: Mapping[str, Any], value: Any) -> Any:
+    """Strict YAML types for a section that is a stdlib dataclass (``env``, ``agent``).
+
+    A stdlib dataclass cannot take ``strict=True``, and in lax mode pydantic would read
+    ``num_humans: true`` as 1 or ``orca_avoid_robot: "no"`` as False: check the types here so
+    these sections are as strict as the others.
+    """
     if not isinstance(value, Mapping):
         return value
+    for name, given in value.items():
+        expected = hints.get(name)
+        if expected is bool and not isinstance(given, bool):
+            raise ValueError(f"{section}.{name}: expected true or false, got {given!r}")
+        if expected is int and (isinstance(given, bool) or not isinstance(given, int)):
+            raise ValueError(f"{section}.{name}: expected an integer, got {given!r}")
+        if expected is float and (isinstance(given, bool) or not isinstance(given, int | float)):
+            raise ValueError(f"{section}.{name}: expected a number, got {given!r}")
+        if typing.get_origin(expected) is Literal and not isinstance(given, str):
+            choices = ", ".join(map(str, typing.get_args(expected)))
+            raise ValueError(f"{section}.{name}: must be one of {choices}, got {given!r}")
+        if typing.get_origin(expected) is tuple and not isinstance(given, list | tuple):
+            raise ValueError(f"{section}.{name}: expected a list, got {given!r}")
+    return value
     for name, given in value.items():
         expected = _AGENT_TYPES.get(name)
         if expected is bool and not isinstance(given, bool):
@@ -166,16 +185,12 @@ class Params(BaseModel):
     @field_validator("agent", mode="before")
     @classmethod
     def _agent_types_are_strict(cls, value: Any) -> Any:
-        return _check_agent_types(value)
+        return _check_strict_types("agent", _AGENT_TYPES, value)
 
     @field_validator("env", mode="before")
     @classmethod
     def _env_types_are_strict(cls, value: Any) -> Any:
-        # A stdlib dataclass cannot take `strict=True`, and in lax mode pydantic would read
-        # `num_humans: true` as 1 or `orca_avoid_robot: "no"` as False. Check the YAML types here
-        # so the env section is as strict as the others.
-        if not isinstance(value, Mapping):
-            return value
+        return _check_strict_types("env", _ENV_TYPES, value)
         for name, given in value.items():
             expected = _ENV_TYPES.get(name)
             if expected is bool and not isinstance(given, bool):
