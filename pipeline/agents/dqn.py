@@ -41,7 +41,7 @@ import torch.nn.functional as F
 from pipeline.agents.dueling import DuelingQNetwork
 from pipeline.agents.features import VARIANTS, Variant, make_variant
 from pipeline.agents.params import AgentParams, check_variant
-from pipeline.agents.replay import Batch, ReplayBuffer
+from pipeline.agents.replay import Batch, NStepAccumulator, ReplayBuffer
 from pipeline.env.core import NUM_ACTIONS, Simulator
 from pipeline.env.params import EnvParams
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_NAMES, COLLISION_WALL, BatchState
@@ -98,14 +98,14 @@ def double_dqn_targets(
     terminals: torch.Tensor,
     next_q_online: torch.Tensor,
     next_q_target: torch.Tensor,
-    gamma: float,
+    discounts: torch.Tensor | float,
 ) -> torch.Tensor:
-    """``y = r + γ·Q_target(s′, argmax_a Q_online(s′, a))·(1 − terminal)``.
+    """``y = r + γᵏ·Q_target(s′, argmax_a Q_online(s′, a))·(1 − terminal)``.
 
     Args:
         rewards, terminals: (batch,); terminals is 1 where nothing is bootstrapped.
         next_q_online, next_q_target: (batch, actions), the two networks' Q-values at s′.
-        gamma: discount per step.
+        discounts: γᵏ, (batch,) or one number (γ for one-step transitions).
 
     Returns:
         (batch,) TD targets. The online network picks the action, the target network values it,
@@ -113,7 +113,7 @@ def double_dqn_targets(
     """
     best = next_q_online.argmax(dim=1, keepdim=True)
     next_value = next_q_target.gather(1, best).squeeze(1)
-    return rewards + gamma * next_value * (1.0 - terminals)
+    return rewards + discounts * next_value * (1.0 - terminals)
 
 
 class DQNLearner:
@@ -161,7 +161,7 @@ class DQNLearner:
                 batch.terminals,
                 self.q_network(batch.next_features),
                 self.target_network(batch.next_features),
-                p.gamma,
+                batch.discounts,
             )
         q = self.q_network(batch.features).gather(1, batch.actions.unsqueeze(1)).squeeze(1)
         loss = F.smooth_l1_loss(q, targets) if p.huber else F.mse_loss(q, targets)
@@ -247,6 +247,29 @@ class TrainResult:
     vae: VAE | None = None
     lstm: LatentLSTM | None = None
     metrics: dict[str, Any] = field(default_factory=dict)
+
+
+def variant_for(
+    name: str,
+    vae: VAE | None,
+    lstm: LatentLSTM | None,
+    params: AgentParams,
+    *,
+    obs_dim: int,
+    device: torch.device | str,
+) -> Variant:
+    """The variant ``name`` with the feature options of ``params``."""
+    return make_variant(
+        name,
+        vae,
+        lstm,
+        obs_dim=obs_dim,
+        device=device,
+        horizon=params.horizon,
+        hidden_features=params.maspm_hidden_features,
+        carry_imagined=params.carry_imagined,
+        sort_humans=params.sort_humans,
+    )
 
 
 def load_world_model(
@@ -381,18 +404,10 @@ def train_agent(
 
     # -- the pieces --------------------------------------------------------------------------
     sim = Simulator(p.num_envs, env_params)
-    features_of = make_variant(
-        variant,
-        vae,
-        lstm,
-        obs_dim=sim.obs_dim,
-        device=device,
-        horizon=p.horizon,
-        hidden_features=p.maspm_hidden_features,
-        carry_imagined=p.carry_imagined,
-    )
+    features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=device)
     learner = DQNLearner(features_of.feature_dim, p, device)
     replay = ReplayBuffer(p.buffer_size, features_of.feature_dim, device, seed=replay_seed)
+    accumulator = NStepAccumulator(p.num_envs, features_of.feature_dim, p.n_step, p.gamma)
 
     obs, _ = sim.reset(seed=training_env_seed(seed))
     features = features_of.reset(obs)
@@ -411,6 +426,7 @@ def train_agent(
             "run": identity,
             "learner": learner.state_dict(),
             "replay": replay.state_dict(),
+            "n_step": accumulator.state_dict(),
             "variant_state": features_of.state_dict(),
             "features": features.cpu().clone(),
             "episode_return": torch.from_numpy(episode_return.copy()),
@@ -433,6 +449,7 @@ def train_agent(
         saved = _load_checkpoint(checkpoint_path, identity)
         learner.load_state_dict(saved["learner"])
         replay.load_state_dict(saved["replay"])
+        accumulator.load_state_dict(saved["n_step"])
         features_of.load_state_dict(saved["variant_state"])
         features = saved["features"].to(device)
         episode_return = saved["episode_return"].numpy().copy()
@@ -470,7 +487,9 @@ def train_agent(
             terminal = result.terminated if p.bootstrap_truncation else done
             next_distance = goal_distances(result.obs)
             learning_reward = result.reward + p.progress_reward * (goal_distance - next_distance)
-            replay.add(features, actions, learning_reward, next_features, terminal)
+            replay.add(
+                *accumulator.push(features, actions, learning_reward, next_features, terminal, done)
+            )
             features = new_features
             goal_distance = next_distance
             if reset_obs is not None:
@@ -591,16 +610,7 @@ class Agent:
     def fresh_variant(self) -> Variant:
         """A new feature builder sharing the frozen world model, with its own per-env state."""
         v = self.variant
-        return make_variant(
-            v.name,
-            v.vae,
-            v.lstm,
-            obs_dim=v.obs_dim,
-            device=v.device,
-            horizon=v.horizon,
-            hidden_features=v.hidden_features,
-            carry_imagined=v.carry_imagined,
-        )
+        return variant_for(v.name, v.vae, v.lstm, self.params, obs_dim=v.obs_dim, device=v.device)
 
     def policy(self) -> Callable[[np.ndarray], np.ndarray]:
         """A greedy policy ``obs (N, obs_dim) → actions (N,)`` for episodes that start together.
@@ -698,15 +708,13 @@ def load_agent(path: str | Path, device: torch.device | str = "cpu") -> Agent:
                 model = model_type(**saved["hyperparameters"])
                 model.load_state_dict(saved["state_dict"])
                 world[name] = model
-        variant = make_variant(
+        variant = variant_for(
             payload["variant"],
             world["vae"],  # type: ignore[arg-type]
             world["lstm"],  # type: ignore[arg-type]
+            params,
             obs_dim=env_params_obs_dim(env_params),
             device=target,
-            horizon=params.horizon,
-            hidden_features=params.maspm_hidden_features,
-            carry_imagined=params.carry_imagined,
         )
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise AgentFileError(f"{path}: agent does not load ({_reason(exc)})") from exc
@@ -728,15 +736,13 @@ def agent_from_result(result: TrainResult) -> Agent:
     """The :class:`Agent` of a finished training run (without going through a file)."""
     device = next(result.q_network.parameters()).device
     p = result.params
-    variant = make_variant(
+    variant = variant_for(
         result.variant,
         result.vae,
         result.lstm,
+        p,
         obs_dim=env_params_obs_dim(result.env_params),
         device=device,
-        horizon=p.horizon,
-        hidden_features=p.maspm_hidden_features,
-        carry_imagined=p.carry_imagined,
     )
     return Agent(result.q_network.eval(), variant, p, result.env_params, {"seed": result.seed})
 
@@ -815,7 +821,7 @@ def bench_train(
     env_params: EnvParams | None = None,
     hidden_features: bool = False,
     horizon: int = 2,
-) -> dict[str, float]:
+) -> dict[str, Any]:
     """Env-steps/s (acting + simulator + features + storing) and gradient updates/s, measured
     separately, with a random-initialised world model of the paper's sizes.
 
@@ -829,7 +835,7 @@ def bench_train(
         p,
         num_envs=num_envs,
         batch_size=batch_size,
-        learning_starts=max(batch_size, p.learning_starts if params else batch_size),
+        learning_starts=batch_size,  # the benchmark calls the update itself
         buffer_size=max(p.buffer_size, num_envs, batch_size),
         horizon=horizon,
         maspm_hidden_features=hidden_features,
@@ -842,10 +848,7 @@ def bench_train(
     if VARIANTS[variant].needs_world_model:
         vae = VAE(sim.obs_dim, 256, 16)
         lstm = LatentLSTM(16, NUM_ACTIONS, 256)
-    features_of = make_variant(
-        variant, vae, lstm, obs_dim=sim.obs_dim, device=target, horizon=horizon,
-        hidden_features=hidden_features,
-    )  # fmt: skip
+    features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=target)
     learner = DQNLearner(features_of.feature_dim, p, target)
     replay = ReplayBuffer(p.buffer_size, features_of.feature_dim, target, seed=0)
     rng = np.random.default_rng(0)
@@ -862,7 +865,9 @@ def bench_train(
             sim.reset_envs(done)
             reset_obs = sim.observation[done]
         next_features, new_features = features_of.step(result.obs, actions, done, reset_obs)
-        replay.add(state["features"], actions, result.reward, next_features, result.terminated)
+        replay.add(
+            state["features"], actions, result.reward, next_features, result.terminated, p.gamma
+        )
         state["features"] = new_features
         return num_envs
 

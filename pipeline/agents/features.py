@@ -36,6 +36,9 @@ imagined state, as the original did).
 (0, 0) — exactly the ``stop`` command — so "the robot was stopped" is the true history, and the
 Q-network's input at t = 0 has the same meaning as at every other step (the paper's code instead
 fed zeros in place of ``h`` or copies of ``z``, inputs the network never saw later in an episode).
+
+With ``sort_humans`` every variant first reorders the observation's humans nearest first
+(:func:`sort_humans_by_distance`), before the VAE or the Q-network sees it.
 """
 
 from __future__ import annotations
@@ -52,6 +55,24 @@ from pipeline.worldmodel.vae import VAE
 
 STOP = ACTION_NAMES.index("stop")
 """The action assumed to precede an episode's first observation (the robot starts at rest)."""
+
+
+def sort_humans_by_distance(obs: torch.Tensor, features_per_human: int = 7) -> torch.Tensor:
+    """Observations (B, 2 + 7·H) with the human blocks reordered nearest first.
+
+    The simulator lists humans in spawn order (paper_spec §2, §8.15), so "the person about to
+    hit me" can sit in any of the three slots and a Q-network has to learn its avoidance three
+    times over. Ordering the blocks by robot–human distance (the first two entries of a block
+    are the human's robot-frame position) gives every slot a meaning; ties keep spawn order.
+    """
+    num_humans = (obs.shape[1] - 2) // features_per_human
+    if num_humans < 2:
+        return obs
+    humans = obs[:, 2:].reshape(obs.shape[0], num_humans, features_per_human)
+    distance_sq = humans[..., 0].square() + humans[..., 1].square()
+    order = distance_sq.argsort(dim=1, stable=True)
+    humans = humans.gather(1, order.unsqueeze(-1).expand(-1, -1, features_per_human))
+    return torch.cat([obs[:, :2], humans.flatten(1)], dim=1)
 
 
 class WorldModelState(NamedTuple):
@@ -80,6 +101,8 @@ class Variant:
             instead of the predicted latents (the original code's 1040-d input).
         carry_imagined: ``2stepahead`` only: carry the imagined state to the next real step
             (the original code's behaviour) instead of the real one.
+        sort_humans: reorder the observation's human blocks nearest first before anything
+            else (see :func:`sort_humans_by_distance`).
     """
 
     name: ClassVar[str]
@@ -95,6 +118,7 @@ class Variant:
         horizon: int = 2,
         hidden_features: bool = False,
         carry_imagined: bool = False,
+        sort_humans: bool = False,
     ) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"horizon: must be an integer >= 1, got {horizon!r}")
@@ -103,6 +127,7 @@ class Variant:
         self.horizon = horizon
         self.hidden_features = bool(hidden_features)
         self.carry_imagined = bool(carry_imagined)
+        self.sort_humans = bool(sort_humans)
         self.vae: VAE | None = None
         self.lstm: LatentLSTM | None = None
         self.latent_dim = 0
@@ -158,7 +183,8 @@ class Variant:
     # -- batched driving -----------------------------------------------------------------------
 
     def _obs_tensor(self, obs: np.ndarray | torch.Tensor) -> torch.Tensor:
-        return torch.as_tensor(obs, dtype=torch.float32).to(self.device)
+        obs_t = torch.as_tensor(obs, dtype=torch.float32).to(self.device)
+        return sort_humans_by_distance(obs_t) if self.sort_humans else obs_t
 
     def zero_state(self, batch: int) -> WorldModelState:
         """All-zero LSTM state for ``batch`` envs (what every episode starts from)."""
@@ -394,6 +420,7 @@ def make_variant(
     horizon: int = 2,
     hidden_features: bool = False,
     carry_imagined: bool = False,
+    sort_humans: bool = False,
 ) -> Variant:
     """Build the variant ``name`` (see :data:`VARIANTS`) around a frozen world model."""
     cls = VARIANTS[check_variant(name)]
@@ -405,4 +432,5 @@ def make_variant(
         horizon=horizon,
         hidden_features=hidden_features,
         carry_imagined=carry_imagined,
+        sort_humans=sort_humans,
     )

@@ -78,6 +78,9 @@ class AgentParams:
     """Replay capacity (transitions); the oldest are overwritten."""
     learning_starts: int = 5_000
     """Transitions collected before the first gradient update (at least batch_size)."""
+    n_step: int = 1
+    """Steps per replayed transition: the TD target sums n discounted rewards before
+    bootstrapping (1: the paper's one-step target)."""
     updates_per_step: int = 8
     """Gradient updates per vector step (updates per transition = this / num_envs)."""
     polyak: float = 0.995
@@ -102,6 +105,10 @@ class AgentParams:
     nothing within this project's compute budget). Logged returns are always the env's."""
     bootstrap_truncation: bool = True
     """Bootstrap through time-limit truncations (true) or treat timeouts as terminal (paper)."""
+    sort_humans: bool = True
+    """Order the observation's humans nearest first before any variant sees it (the simulator
+    lists them in spawn order). The single largest gain measured: greedy success 66% → 83%
+    after 4000 episodes of `dueling-dqn`. A world model should be trained on the same order."""
     horizon: int = 2
     """Imagined steps of `2stepahead` and `2stepahead-maspm` (the paper tried 2, 4, 8, 16)."""
     maspm_hidden_features: bool = False
@@ -113,7 +120,7 @@ class AgentParams:
     """`episodes_to_solve` is the first episode where the rolling success rate reaches this."""
     solved_window: int = 100
     """Episodes in the rolling success rate of `episodes_to_solve`."""
-    checkpoint_every: int = 500
+    checkpoint_every: int = 1000
     """Write a resumable checkpoint every this many finished episodes."""
     eval_episodes: int = 500
     """Fresh test scenarios of the greedy evaluation."""
@@ -144,7 +151,7 @@ class AgentParams:
                     f"got {getattr(self, name)!r}"
                 )
         positive = (
-            "episodes", "num_envs", "learning_rate", "batch_size", "buffer_size",
+            "episodes", "num_envs", "learning_rate", "batch_size", "buffer_size", "n_step",
             "updates_per_step", "epsilon_decay", "stream_size", "horizon", "solved_success_rate",
             "solved_window", "checkpoint_every", "eval_episodes",
         )  # fmt: skip
@@ -222,6 +229,8 @@ _PAPER_COMMON: dict[str, Any] = {
     "trunk_sizes": (512, 128),
     "stream_size": 128,
     "progress_reward": 0.0,
+    "n_step": 1,
+    "sort_humans": False,
 }
 _PAPER_ADAM: dict[str, Any] = {"optimizer": "adam", "amsgrad": False, "weight_decay": 0.0}
 # torch.optim.AdamW's default weight decay, which the paper's code left in place.

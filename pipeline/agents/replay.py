@@ -1,4 +1,5 @@
-"""Uniform experience replay in preallocated arrays, returning typed batches of tensors.
+"""Uniform experience replay in preallocated arrays, returning typed batches of tensors, and the
+per-environment accumulator that turns one-step transitions into n-step ones.
 
 Storage is numpy, allocated once with ``np.zeros``: the operating system hands out zeroed pages
 lazily, so a 1M-transition buffer (the paper's MASPM setting) costs memory only as it fills.
@@ -21,12 +22,14 @@ class Batch(NamedTuple):
     Attributes:
         features: (batch, feature_dim) float32, the Q-network input at time t.
         actions: (batch,) int64, the action taken at t.
-        rewards: (batch,) float32, the reward of that step.
-        next_features: (batch, feature_dim) float32, the Q-network input at t + 1 (for the last
-            step of an episode: the features of its final observation).
+        rewards: (batch,) float32, the (n-step discounted) reward from t on.
+        next_features: (batch, feature_dim) float32, the Q-network input k steps later (for
+            the last steps of an episode: the features of its final observation).
         terminals: (batch,) float32, 1 where the return must not be bootstrapped from
             ``next_features`` (a true terminal state; also a time-limit truncation when the
             learner treats timeouts as terminal), else 0.
+        discounts: (batch,) float32, γᵏ for the k steps between ``features`` and
+            ``next_features`` (γ for one-step transitions).
     """
 
     features: torch.Tensor
@@ -34,6 +37,10 @@ class Batch(NamedTuple):
     rewards: torch.Tensor
     next_features: torch.Tensor
     terminals: torch.Tensor
+    discounts: torch.Tensor
+
+
+_FIELDS = ("features", "next_features", "actions", "rewards", "terminals", "discounts")
 
 
 def _as_numpy(array: np.ndarray | torch.Tensor) -> np.ndarray:
@@ -70,6 +77,7 @@ class ReplayBuffer:
         self.actions = np.zeros(self.capacity, dtype=np.int64)
         self.rewards = np.zeros(self.capacity, dtype=np.float32)
         self.terminals = np.zeros(self.capacity, dtype=np.float32)
+        self.discounts = np.zeros(self.capacity, dtype=np.float32)
         self.position = 0
         """Index the next transition is written to."""
         self.size = 0
@@ -85,12 +93,14 @@ class ReplayBuffer:
         rewards: np.ndarray | torch.Tensor,
         next_features: np.ndarray | torch.Tensor,
         terminals: np.ndarray | torch.Tensor,
+        discounts: np.ndarray | torch.Tensor | float,
     ) -> None:
-        """Append a batch of ``n`` transitions (one per env), wrapping around at the end.
+        """Append a batch of ``n`` transitions, wrapping around at the end.
 
         Args:
             features, next_features: (n, feature_dim).
-            actions: (n,) integers; rewards: (n,); terminals: (n,) bool or 0/1.
+            actions: (n,) integers; rewards: (n,); terminals: (n,) bool or 0/1;
+            discounts: (n,) or one number, γᵏ of each transition.
         """
         features = _as_numpy(features)
         n = features.shape[0]
@@ -106,6 +116,7 @@ class ReplayBuffer:
         self.actions[index] = _as_numpy(actions)
         self.rewards[index] = _as_numpy(rewards)
         self.terminals[index] = _as_numpy(terminals)
+        self.discounts[index] = _as_numpy(discounts)
         self.position = int((self.position + n) % self.capacity)
         self.size = min(self.size + n, self.capacity)
 
@@ -128,6 +139,7 @@ class ReplayBuffer:
             rewards=to_device(self.rewards[index]),
             next_features=to_device(self.next_features[index]),
             terminals=to_device(self.terminals[index]),
+            discounts=to_device(self.discounts[index]),
         )
 
     # -- checkpoints ---------------------------------------------------------------------------
@@ -135,18 +147,16 @@ class ReplayBuffer:
     def state_dict(self) -> dict[str, Any]:
         """Contents (valid rows only, as tensors), pointers and the sampling generator's state."""
         rows = slice(0, self.size)
-        return {
+        state: dict[str, Any] = {
             "capacity": self.capacity,
             "feature_dim": self.feature_dim,
             "position": self.position,
             "size": self.size,
             "rng": self.rng.bit_generator.state,
-            "features": torch.from_numpy(self.features[rows].copy()),
-            "next_features": torch.from_numpy(self.next_features[rows].copy()),
-            "actions": torch.from_numpy(self.actions[rows].copy()),
-            "rewards": torch.from_numpy(self.rewards[rows].copy()),
-            "terminals": torch.from_numpy(self.terminals[rows].copy()),
         }
+        for name in _FIELDS:
+            state[name] = torch.from_numpy(getattr(self, name)[rows].copy())
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` returned (same capacity and feature size)."""
@@ -156,8 +166,122 @@ class ReplayBuffer:
                 f"{state['feature_dim']}, expected {self.capacity} and {self.feature_dim}"
             )
         size = int(state["size"])
-        for name in ("features", "next_features", "actions", "rewards", "terminals"):
+        for name in _FIELDS:
             getattr(self, name)[:size] = state[name].numpy()
         self.size = size
         self.position = int(state["position"])
         self.rng.bit_generator.state = state["rng"]
+
+
+class NStepAccumulator:
+    """Turns each env's one-step transitions into n-step ones (``n = 1``: passes them through).
+
+    Each env keeps its last ``n`` (features, action, reward). Once it holds ``n`` of them, every
+    step emits the oldest as ``(s_t, a_t, Σ_{i<n} γⁱ r_{t+i}, s_{t+n}, terminal, γⁿ)``. When an
+    episode ends, everything it still holds is emitted with the shorter horizons left
+    (``k = n, …, 1`` steps to the final observation, discount γᵏ, the episode's terminal flag).
+
+    Args:
+        num_envs: environments stepped together.
+        feature_dim: size of the feature vectors.
+        n: steps per transition (≥ 1).
+        gamma: discount per step.
+    """
+
+    def __init__(self, num_envs: int, feature_dim: int, n: int, gamma: float) -> None:
+        if n < 1:
+            raise ValueError(f"n: must be >= 1, got {n}")
+        self.n = int(n)
+        self.gamma = float(gamma)
+        self.features = np.zeros((num_envs, self.n, feature_dim), dtype=np.float32)
+        self.actions = np.zeros((num_envs, self.n), dtype=np.int64)
+        self.rewards = np.zeros((num_envs, self.n), dtype=np.float64)
+        self.count = np.zeros(num_envs, dtype=np.int64)
+        """Pending one-step transitions of each env (oldest at index 0)."""
+        self._powers = self.gamma ** np.arange(self.n + 1)
+
+    def push(
+        self,
+        features: np.ndarray | torch.Tensor,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        next_features: np.ndarray | torch.Tensor,
+        terminals: np.ndarray,
+        done: np.ndarray,
+    ) -> tuple[np.ndarray, ...]:
+        """Add one step of every env; return the transitions that are complete.
+
+        Args:
+            features, next_features: (N, feature_dim), the step's s_t and s_{t+1}.
+            actions, rewards: (N,).
+            terminals: (N,) bool, no bootstrapping from s_{t+1} (see :class:`Batch`).
+            done: (N,) bool, the env's episode ended with this step.
+
+        Returns:
+            ``(features, actions, rewards, next_features, terminals, discounts)`` arrays of the
+            ``m`` emitted transitions, in env order (an ending episode's oldest first).
+        """
+        features = _as_numpy(features)
+        next_features = _as_numpy(next_features)
+        envs = np.arange(self.count.shape[0])
+        self.features[envs, self.count] = features
+        self.actions[envs, self.count] = actions
+        self.rewards[envs, self.count] = rewards
+        self.count += 1
+
+        # Envs whose window is full and whose episode goes on: emit their oldest, all at once.
+        full = np.flatnonzero((self.count == self.n) & ~done)
+        parts = [
+            (
+                self.features[full, 0],
+                self.actions[full, 0],
+                self.rewards[full] @ self._powers[: self.n],
+                next_features[full],
+                np.zeros(full.size),
+                np.full(full.size, self._powers[self.n]),
+            )
+        ]
+        self.features[full, :-1] = self.features[full, 1:]
+        self.actions[full, :-1] = self.actions[full, 1:]
+        self.rewards[full, :-1] = self.rewards[full, 1:]
+        self.count[full] -= 1
+        # Envs whose episode ended: emit everything pending, k = pending … 1 steps from the end.
+        for env in np.flatnonzero(done):
+            pending = int(self.count[env])
+            steps = pending - np.arange(pending)
+            # Discounted sums of the rewards from each pending step to the end of the episode.
+            returns = [
+                self.rewards[env, j:pending] @ self._powers[: pending - j] for j in range(pending)
+            ]
+            parts.append(
+                (
+                    self.features[env, :pending],
+                    self.actions[env, :pending],
+                    np.asarray(returns),
+                    np.repeat(next_features[env][None], pending, axis=0),
+                    np.full(pending, float(terminals[env])),
+                    self._powers[steps],
+                )
+            )
+            self.count[env] = 0
+        fields = list(zip(*parts, strict=True))
+        return (
+            np.concatenate(fields[0]).astype(np.float32, copy=False),
+            np.concatenate(fields[1]).astype(np.int64, copy=False),
+            np.concatenate(fields[2]).astype(np.float32),
+            np.concatenate(fields[3]).astype(np.float32, copy=False),
+            np.concatenate(fields[4]).astype(np.float32),
+            np.concatenate(fields[5]).astype(np.float32),
+        )
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "features": torch.from_numpy(self.features.copy()),
+            "actions": torch.from_numpy(self.actions.copy()),
+            "rewards": torch.from_numpy(self.rewards.copy()),
+            "count": torch.from_numpy(self.count.copy()),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        for name in ("features", "actions", "rewards", "count"):
+            getattr(self, name)[...] = state[name].numpy()

@@ -70,9 +70,14 @@ def test_double_dqn_target_by_hand() -> None:
     # The online network picks the action at s′ (argmax 2, 0, 1); the target network values it.
     next_online = torch.tensor([[0.0, 1.0, 3.0, 2.0], [9.0, 0.0, 0.0, 0.0], [0.0, 5.0, 1.0, 0.0]])
     next_target = torch.tensor([[7.0, 7.0, 2.0, 9.0], [4.0, 4.0, 4.0, 4.0], [8.0, -2.0, 8.0, 8.0]])
-    y = double_dqn_targets(rewards, terminals, next_online, next_target, gamma=0.9)
+    y = double_dqn_targets(rewards, terminals, next_online, next_target, 0.9)
     # 1 + 0.9·2 = 2.8; terminal: −1; 0.5 + 0.9·(−2) = −1.3 (not max target 8: no over-estimate).
     torch.testing.assert_close(y, torch.tensor([2.8, -1.0, -1.3]))
+    # n-step transitions carry their own discount γᵏ.
+    y = double_dqn_targets(
+        rewards, terminals, next_online, next_target, torch.tensor([0.5, 1, 0.25])
+    )
+    torch.testing.assert_close(y, torch.tensor([2.0, -1.0, 0.0]))
 
 
 def test_one_update_takes_a_gradient_step_and_a_polyak_step() -> None:
@@ -87,7 +92,7 @@ def test_one_update_takes_a_gradient_step_and_a_polyak_step() -> None:
     target_before = weights(learner.target_network)
     batch = Batch(
         torch.randn(8, 3), torch.randint(0, 4, (8,)), torch.randn(8), torch.randn(8, 3),
-        torch.zeros(8),
+        torch.zeros(8), torch.full((8,), 0.9),
     )  # fmt: skip
     loss = learner.update(batch)
     assert loss.ndim == 0 and loss > 0
@@ -135,7 +140,11 @@ def test_paper_preset_reproduces_the_per_variant_table() -> None:
         assert (maspm.gamma, maspm.buffer_size, maspm.polyak) == (0.98, 1_000_000, 0.99)
         assert (maspm.epsilon_decay, maspm.optimizer) == (0.998, "adam")
     assert paper.resolved("maspm").episodes == 10  # run scale is not part of the preset
-    assert all(paper.resolved(name).progress_reward == 0.0 for name in ("maspm", "2stepahead"))
+    for name in ("maspm", "2stepahead"):  # the paper's reward and observation order
+        assert (paper.resolved(name).progress_reward, paper.resolved(name).sort_humans) == (
+            0,
+            False,
+        )
 
 
 @pytest.mark.parametrize(
@@ -240,12 +249,13 @@ class Interrupted(Exception):
     pass
 
 
-@pytest.mark.parametrize("variant", ["dueling-dqn", "2stepahead"])
+@pytest.mark.parametrize(("variant", "n_step"), [("dueling-dqn", 1), ("2stepahead", 3)])
 def test_resumed_run_ends_with_the_same_weights(
-    variant: str, world_model_files: tuple[Path, Path], tmp_path: Path
+    variant: str, n_step: int, world_model_files: tuple[Path, Path], tmp_path: Path
 ) -> None:
     files = world_model_files
-    uninterrupted = train_agent(variant, TINY, TINY_ENV, *files, seed=5)
+    params = dataclasses.replace(TINY, n_step=n_step)
+    uninterrupted = train_agent(variant, params, TINY_ENV, *files, seed=5)
 
     def interrupt(rows: list[dict]) -> None:
         if rows[-1]["episode"] >= 25:  # after the checkpoint at 20, before the one at 30
@@ -253,12 +263,12 @@ def test_resumed_run_ends_with_the_same_weights(
 
     checkpoint = tmp_path / "run.ckpt"
     with pytest.raises(Interrupted):
-        train_agent(variant, TINY, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint,
+        train_agent(variant, params, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint,
                     on_episodes=interrupt)  # fmt: skip
     saved = torch.load(checkpoint, weights_only=True)
     assert 20 <= len(saved["rows"]) < 25
     resumed = train_agent(
-        variant, TINY, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint, resume=True
+        variant, params, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint, resume=True
     )
     assert_same_weights(uninterrupted.q_network, resumed.q_network)
     assert without_time(resumed.episodes) == without_time(uninterrupted.episodes)
@@ -266,7 +276,7 @@ def test_resumed_run_ends_with_the_same_weights(
     assert [p.name for p in tmp_path.iterdir()] == ["run.ckpt"]  # no temporary files left
     # Resuming a finished run just gives its result back.
     again = train_agent(
-        variant, TINY, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint, resume=True
+        variant, params, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint, resume=True
     )
     assert_same_weights(again.q_network, resumed.q_network)
 
@@ -339,6 +349,7 @@ def test_save_load_agent_and_evaluate(world_model_files: tuple[Path, Path], tmp_
     agent = load_agent(path, device="cpu")
     assert agent.variant_name == "maspm" and agent.params == result.params
     assert agent.extra["seed"] == 2 and agent.extra["note"] == "test"
+    assert agent.variant.sort_humans is result.params.sort_humans is True
     assert_same_weights(agent.q_network, result.q_network)
     assert_same_weights(agent.variant.lstm, result.lstm)
     ids = np.arange(7, 19)

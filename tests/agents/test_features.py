@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.agents.features import STOP, VARIANTS, WorldModelState, make_variant
+from pipeline.agents.features import (
+    STOP,
+    VARIANTS,
+    WorldModelState,
+    make_variant,
+    sort_humans_by_distance,
+)
 from pipeline.env import EnvParams, Simulator
 from tests.agents.conftest import HIDDEN, LATENT, OBS_DIM, tiny_world_model
 
@@ -257,3 +263,33 @@ def test_bad_names_and_options() -> None:
         make_variant("maspm", vae, lstm, obs_dim=9)
     with pytest.raises(RuntimeError, match="reset"):
         make_variant("dueling-dqn").step(np.zeros((1, 23), np.float32), np.zeros(1, np.int64))
+
+
+def test_sort_humans_by_distance_by_hand() -> None:
+    goal = [1.0, 2.0]
+    far = [3.0, 4.0, 0.1, 0.2, 0.36, 0.3, 0.5]  # 5 m away
+    near = [0.0, 1.0, 0.3, 0.4, 0.36, 0.1, 0.5]  # 1 m
+    middle = [-2.0, 0.0, 0.5, 0.6, 0.36, 0.2, 0.5]  # 2 m
+    obs = torch.tensor([goal + far + near + middle])
+    expected = torch.tensor([goal + near + middle + far])
+    assert torch.equal(sort_humans_by_distance(obs), expected)
+    # Any spawn order of the same people gives the same input.
+    shuffled = torch.tensor([goal + middle + far + near])
+    assert torch.equal(sort_humans_by_distance(shuffled), expected)
+    # Ties keep spawn order; fewer than two humans: nothing to sort.
+    tie = torch.tensor([goal + near + [1.0, 0.0, 9, 9, 9, 9, 9]])
+    assert torch.equal(sort_humans_by_distance(tie), tie)
+    assert torch.equal(
+        sort_humans_by_distance(torch.tensor([goal + far])), torch.tensor([goal + far])
+    )
+
+
+@pytest.mark.parametrize("name", ["dueling-dqn", "maspm"])
+def test_sort_humans_option_feeds_the_sorted_observation(name: str) -> None:
+    obs, actions = observations(1)
+    sorted_obs = sort_humans_by_distance(torch.as_tensor(obs[1]))
+    assert not torch.equal(sorted_obs, torch.as_tensor(obs[1]))  # some env is out of order
+    v, plain = variant(name, sort_humans=True), variant(name)
+    v.reset(obs[0])
+    plain.reset(sort_humans_by_distance(torch.as_tensor(obs[0])))
+    torch.testing.assert_close(v.step(obs[1], actions[0]), plain.step(sorted_obs, actions[0]))
