@@ -136,7 +136,7 @@ def episode_frames(
     episode: Episode, params: EnvParams, *, label: str = "", size: int = 480
 ) -> list[np.ndarray]:
     """RGB frames (size, size, 3) of every state of an episode, with its trail and a caption."""
-    from pipeline.env.render import Scene, render_frame
+    from pipeline.env.render import render_frame
 
     outcome = (
         "success"
@@ -149,20 +149,27 @@ def episode_frames(
     for t in range(episode.num_steps + 1):
         status = outcome if t == episode.num_steps else ""
         title = f"{label} scenario {episode.scenario_id}  step {t}  {status}".strip()
-        scene = Scene(
-            robot_xy=episode.robot_xy[t],
-            robot_theta=float(episode.robot_theta[t]),
-            robot_radius=params.robot_radius,
-            goal_xy=episode.goal_xy,
-            goal_radius=params.goal_radius,
-            human_xy=episode.human_xy[t],
-            human_theta=episode.human_theta[t],
-            human_radius=params.human_radius,
-            personal_space=0.5,
-            room_half_size=params.wall_half_size,
-            wall_thickness=params.wall_thickness,
-            robot_trail=episode.robot_xy[: t + 1],
-            title=title,
-        )
+        scene = episode_scene(episode, t, params, title)
         frames.append(render_frame(scene, size=size))
     return frames
+
+
+def episode_scene(episode: Episode, t: int, params: EnvParams, title: str = ""):
+    """The ``render.Scene`` of state ``t`` of a recorded episode, with the trail so far."""
+    from pipeline.env.render import Scene
+
+    return Scene(
+        robot_xy=episode.robot_xy[t],
+        robot_theta=float(episode.robot_theta[t]),
+        robot_radius=params.robot_radius,
+        goal_xy=episode.goal_xy,
+        goal_radius=params.goal_radius,
+        human_xy=episode.human_xy[t],
+        human_theta=episode.human_theta[t],
+        human_radius=params.human_radius,
+        personal_space=0.5,
+        room_half_size=params.wall_half_size,
+        wall_thickness=params.wall_thickness,
+        robot_trail=episode.robot_xy[: t + 1],
+        title=title,
+    )

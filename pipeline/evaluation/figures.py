@@ -16,8 +16,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from pipeline.env.params import EnvParams
-from pipeline.env.render import Scene, render_frame, tile_frames, write_gif
-from pipeline.env.rollout import Episode
+from pipeline.env.render import render_frame, tile_frames, write_gif
+from pipeline.env.rollout import Episode, episode_scene
 from pipeline.io import atomic_path
 from pipeline.metrics import METRIC_UNITS
 
@@ -267,24 +267,6 @@ def _outcome_text(episode: Episode) -> str:
     return "timeout"
 
 
-def _scene(episode: Episode, t: int, params: EnvParams, title: str) -> Scene:
-    return Scene(
-        robot_xy=episode.robot_xy[t],
-        robot_theta=float(episode.robot_theta[t]),
-        robot_radius=params.robot_radius,
-        goal_xy=episode.goal_xy,
-        goal_radius=params.goal_radius,
-        human_xy=episode.human_xy[t],
-        human_theta=episode.human_theta[t],
-        human_radius=params.human_radius,
-        personal_space=0.5,
-        room_half_size=params.wall_half_size,
-        wall_thickness=params.wall_thickness,
-        robot_trail=episode.robot_xy[: t + 1],
-        title=title,
-    )
-
-
 def scenario_frames(
     episodes: Mapping[str, Episode],
     params: EnvParams,
@@ -325,7 +307,7 @@ def scenario_frames(
             step = min(t, episode.num_steps)
             status = f" {_outcome_text(episode)}" if step == episode.num_steps else ""
             title = f"{method} s{episode.scenario_id} t{step}{status}"
-            cells.append(render_frame(_scene(episode, step, params, title), size=size))
+            cells.append(render_frame(episode_scene(episode, step, params, title), size=size))
         frames.append(tile_frames(cells, columns))
     return frames + [frames[-1]] * hold
 
