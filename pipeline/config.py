@@ -24,7 +24,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from pipeline.agents.params import AgentParams
+from pipeline.agents.params import VARIANT_NAMES, AgentParams
 from pipeline.env.params import EnvParams
 from pipeline.io import atomic_path
 
@@ -32,11 +32,15 @@ Device = Literal["auto", "cpu", "cuda"]
 
 __all__ = [
     "AgentParams",
+    "BaselinesParams",
     "CollectParams",
     "ConfigError",
     "Device",
+    "EvalParams",
+    "ExperimentParams",
     "LstmParams",
     "Params",
+    "ReportParams",
     "VaeParams",
     "flatten",
     "load_params",
@@ -121,6 +125,95 @@ class LstmParams(BaseModel):
     """`auto` uses CUDA when available, else the CPU."""
 
 
+class ExperimentParams(BaseModel):
+    """Which agents the pipeline trains: every variant × every seed (``dvc.yaml``'s matrix)."""
+
+    model_config = _SECTION_CONFIG
+
+    variants: list[str] = Field(default_factory=lambda: list(VARIANT_NAMES), min_length=1)
+    """Agent variants to train and evaluate (pipeline/agents/params.py lists them)."""
+    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=1)
+    """Training seeds of every variant; results are reported over seeds and scenarios."""
+
+    @field_validator("variants")
+    @classmethod
+    def _known_variants(cls, value: list[str]) -> list[str]:
+        for name in value:
+            if name not in VARIANT_NAMES:
+                raise ValueError(f"unknown {name!r}; expected some of {', '.join(VARIANT_NAMES)}")
+        if len(set(value)) != len(value):
+            raise ValueError(f"a variant is listed twice in {value}")
+        return value
+
+    @field_validator("seeds")
+    @classmethod
+    def _distinct_seeds(cls, value: list[int]) -> list[int]:
+        if any(seed < 0 for seed in value):
+            raise ValueError(f"must be non-negative, got {value}")
+        if len(set(value)) != len(value):
+            raise ValueError(f"a seed is listed twice in {value}")
+        return value
+
+
+class EvalParams(BaseModel):
+    """The paired test: every method runs the same scenarios ``0..episodes-1``."""
+
+    model_config = _SECTION_CONFIG
+
+    episodes: int = Field(500, gt=0)
+    """Test scenarios per method and training seed (the paper: 500)."""
+    scenario_seed: int = Field(1_000_003, ge=0)
+    """Seed of the test scenarios; training scenarios use other seeds (never these)."""
+    batch_size: int = Field(500, gt=0)
+    """Scenarios simulated together (speed only: results do not depend on it)."""
+    device: Device = "auto"
+    """Where the agents' networks run."""
+
+
+class BaselinesParams(BaseModel):
+    """Overrides of the ORCA and Social Force robots' parameters (pipeline/agents/baselines.py
+    documents each; empty: the defaults)."""
+
+    model_config = _SECTION_CONFIG
+
+    orca: dict[str, float | int] = Field(default_factory=dict)
+    """OrcaBaselineParams fields, e.g. safety_margin: 0.2."""
+    sfm: dict[str, float | int] = Field(default_factory=dict)
+    """SfmBaselineParams fields, e.g. human_strength: 0.4."""
+
+    @field_validator("orca", "sfm")
+    @classmethod
+    def _valid_overrides(cls, value: dict[str, Any], info: Any) -> dict[str, Any]:
+        from pipeline.agents.baselines import make_baseline
+
+        make_baseline(info.field_name, **value)  # one-line error naming a bad key or value
+        return value
+
+
+class ReportParams(BaseModel):
+    """The report: paired tests, figures."""
+
+    model_config = _SECTION_CONFIG
+
+    reference: str = "dueling-dqn"
+    """The method every other is compared with, scenario by scenario."""
+
+    @field_validator("reference")
+    @classmethod
+    def _known_method(cls, value: str) -> str:
+        methods = (*VARIANT_NAMES, "orca", "sfm")
+        if value not in methods:
+            raise ValueError(f"unknown method {value!r}; expected one of {', '.join(methods)}")
+        return value
+
+    alpha: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
+    """Family-wise error rate of the paired tests (Holm-corrected)."""
+    smoothing_window: int = Field(100, gt=0)
+    """Rolling-mean window of the training curves (episodes)."""
+    gif_scenarios: list[int] = Field(default_factory=lambda: [0, 1, 2])
+    """Test scenarios shown side by side in reports/figures/scenarios.gif (empty: no GIF)."""
+
+
 _ENV_TYPES: dict[str, Any] = typing.get_type_hints(EnvParams)
 _AGENT_TYPES: dict[str, Any] = typing.get_type_hints(AgentParams)
 
@@ -148,20 +241,6 @@ def _check_strict_types(section: str, hints: Mapping[str, Any], value: Any) -> A
         if typing.get_origin(expected) is tuple and not isinstance(given, list | tuple):
             raise ValueError(f"{section}.{name}: expected a list, got {given!r}")
     return value
-    for name, given in value.items():
-        expected = _AGENT_TYPES.get(name)
-        if expected is bool and not isinstance(given, bool):
-            raise ValueError(f"agent.{name}: expected true or false, got {given!r}")
-        if expected is int and (isinstance(given, bool) or not isinstance(given, int)):
-            raise ValueError(f"agent.{name}: expected an integer, got {given!r}")
-        if expected is float and (isinstance(given, bool) or not isinstance(given, int | float)):
-            raise ValueError(f"agent.{name}: expected a number, got {given!r}")
-        if typing.get_origin(expected) is Literal and not isinstance(given, str):
-            choices = ", ".join(map(str, typing.get_args(expected)))
-            raise ValueError(f"agent.{name}: must be one of {choices}, got {given!r}")
-        if typing.get_origin(expected) is tuple and not isinstance(given, list | tuple):
-            raise ValueError(f"agent.{name}: expected a list, got {given!r}")
-    return value
 
 
 class Params(BaseModel):
@@ -181,6 +260,14 @@ class Params(BaseModel):
     """LSTM world-model training."""
     agent: AgentParams = Field(default_factory=AgentParams)
     """The Dueling DQN agents (all five variants); see pipeline/agents/params.py."""
+    experiment: ExperimentParams = Field(default_factory=ExperimentParams)
+    """Variants and training seeds of the pipeline."""
+    eval: EvalParams = Field(default_factory=EvalParams)
+    """The paired evaluation on test scenarios."""
+    baselines: BaselinesParams = Field(default_factory=BaselinesParams)
+    """ORCA and Social Force robots."""
+    report: ReportParams = Field(default_factory=ReportParams)
+    """Statistics and figures of the report."""
 
     @field_validator("agent", mode="before")
     @classmethod
@@ -191,20 +278,6 @@ class Params(BaseModel):
     @classmethod
     def _env_types_are_strict(cls, value: Any) -> Any:
         return _check_strict_types("env", _ENV_TYPES, value)
-        for name, given in value.items():
-            expected = _ENV_TYPES.get(name)
-            if expected is bool and not isinstance(given, bool):
-                raise ValueError(f"env.{name}: expected true or false, got {given!r}")
-            if expected is int and (isinstance(given, bool) or not isinstance(given, int)):
-                raise ValueError(f"env.{name}: expected an integer, got {given!r}")
-            if expected is float and (
-                isinstance(given, bool) or not isinstance(given, int | float)
-            ):
-                raise ValueError(f"env.{name}: expected a number, got {given!r}")
-            if typing.get_origin(expected) is Literal and not isinstance(given, str):
-                choices = ", ".join(map(str, typing.get_args(expected)))
-                raise ValueError(f"env.{name}: must be one of {choices}, got {given!r}")
-        return value
 
 
 # ---------------------------------------------------------------------------------------------

@@ -275,7 +275,18 @@ def test_save_resolved_round_trip(tmp_path: Path) -> None:
 
 def test_params_dict_is_plain_and_json_able() -> None:
     data = params_dict(Params())
-    assert list(data) == ["seed", "env", "collect", "vae", "lstm", "agent"]
+    assert list(data) == [
+        "seed",
+        "env",
+        "collect",
+        "vae",
+        "lstm",
+        "agent",
+        "experiment",
+        "eval",
+        "baselines",
+        "report",
+    ]
     assert data["env"]["human_policy"] == "mixed"
     assert json.loads(json.dumps(data)) == data
 
