@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
+import json
 import random
 import time
 from collections.abc import Callable, Sequence
@@ -320,13 +322,47 @@ def _load_global_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
 
 
-def _run_identity(variant: str, params: AgentParams, env_params: EnvParams, seed: int) -> dict:
+def _file_digest(path: str | Path | None) -> str | None:
+    if path is None:
+        return None
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None  # load_world_model reports the missing file
+
+
+def run_identity(
+    variant: str,
+    params: AgentParams,
+    env_params: EnvParams,
+    seed: int,
+    vae_path: str | Path | None = None,
+    lstm_path: str | Path | None = None,
+) -> dict[str, Any]:
+    """What makes two training runs the same run: a checkpoint resumes only its own run.
+
+    ``params`` are resolved for the variant (the ``paper`` preset applied); the world model
+    enters by the content of its files, so retraining the VAE or LSTM invalidates checkpoints.
+    """
+    p = params.resolved(variant)
+    world = VARIANTS[check_variant(variant)].needs_world_model
     return {
         "variant": variant,
-        "params": params.to_dict(),
+        "params": p.to_dict(),
         "env_params": env_params.to_dict(),
         "seed": seed,
+        "world_model": {
+            "vae": _file_digest(vae_path) if world else None,
+            "lstm": _file_digest(lstm_path) if world else None,
+        },
     }
+
+
+def checkpoint_file(directory: str | Path, identity: dict[str, Any]) -> Path:
+    """``{directory}/{variant}/seed-{seed}-{digest}.ckpt``: one file per distinct run, so a
+    changed parameter never resumes (or overwrites) another run's checkpoint."""
+    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:12]
+    return Path(directory) / identity["variant"] / f"seed-{identity['seed']}-{digest}.ckpt"
 
 
 def _load_checkpoint(path: Path, identity: dict[str, Any]) -> dict[str, Any]:
@@ -342,10 +378,10 @@ def _load_checkpoint(path: Path, identity: dict[str, Any]) -> dict[str, Any]:
             f"this code reads version {FORMAT_VERSION}"
         )
     saved = payload["run"]
-    for key in ("variant", "seed", "params", "env_params"):
-        if saved[key] != identity[key]:
+    for key in ("variant", "seed", "params", "env_params", "world_model"):
+        if saved.get(key) != identity[key]:
             differing = key
-            if isinstance(saved[key], dict):
+            if isinstance(saved.get(key), dict):
                 names = sorted(k for k in identity[key] if saved[key].get(k) != identity[key][k])
                 differing = ", ".join(f"{key}.{name}" for name in names)
             raise ValueError(
@@ -394,7 +430,7 @@ def train_agent(
     p = params.resolved(variant)
     device = resolve_device(p.device)
     vae, lstm = load_world_model(variant, vae_path, lstm_path, device)
-    identity = _run_identity(variant, p, env_params, seed)
+    identity = run_identity(variant, p, env_params, seed, vae_path, lstm_path)
     checkpoint_path = Path(checkpoint_path) if checkpoint_path is not None else None
 
     # -- seeding: one generator per purpose, all derived from `seed` -------------------------
@@ -803,6 +839,41 @@ def evaluate_agent(
                 }
             )
     return rows
+
+
+def write_training_log(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
+    """The training log (one row per episode, :data:`EPISODE_COLUMNS`) as Parquet, atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.table({name: [row[name] for row in rows] for name in EPISODE_COLUMNS})
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def validation_seed(seed: int) -> int:
+    """Simulator seed of the greedy check at the end of training run ``seed``: scenarios that are
+    neither the run's training scenarios nor any evaluation's test scenarios."""
+    return int(np.random.SeedSequence([seed, 0x7A11D]).generate_state(1)[0])
+
+
+def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Summary of a training run: totals, the last episodes' rates and the greedy check."""
+    last = result.episodes[-result.params.solved_window :]
+    return {
+        "episodes": len(result.episodes),
+        "episodes_to_solve": result.episodes_to_solve,
+        "env_steps": result.env_steps,
+        "updates": result.updates,
+        "wall_time_s": result.wall_time,
+        "env_steps_per_s": result.env_steps / max(result.wall_time, 1e-9),
+        "final_success_rate": float(np.mean([row["success"] for row in last])),
+        "final_return": float(np.mean([row["return"] for row in last])),
+        "greedy_episodes": len(greedy),
+        "greedy_success_rate": float(np.mean([row["success"] for row in greedy])),
+        "greedy_collision_rate": float(np.mean([row["collision"] != "none" for row in greedy])),
+        "greedy_timeout_rate": float(np.mean([row["timeout"] for row in greedy])),
+    }
 
 
 # =============================================================================================
