@@ -8,6 +8,7 @@ unreachable tracking server) end with one line on stderr and exit code 2, never 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import sys
 from collections.abc import Callable, Iterator
@@ -110,7 +111,11 @@ def _with_device(params: Any, section: str, device: str | None) -> Any:
         return params
     if device not in ("auto", "cpu", "cuda"):
         raise UserError(f"--device: must be one of auto, cpu, cuda, got {device!r}")
-    updated = getattr(params, section).model_copy(update={"device": device})
+    current = getattr(params, section)
+    if dataclasses.is_dataclass(current):  # the agent section is a stdlib dataclass
+        updated = dataclasses.replace(current, device=device)
+    else:
+        updated = current.model_copy(update={"device": device})
     return params.model_copy(update={section: updated})
 
 
@@ -298,6 +303,261 @@ def train_lstm_command(
     )
 
 
+# --------------------------------------------------------------------------- agents
+def _training_logger(run: Any, every: int, window: int) -> Callable[[list[dict[str, Any]]], None]:
+    """MLflow curves of a training run: means over the last ``window`` episodes, every
+    ``every`` episodes (the per-episode rows go to the Parquet log)."""
+    import numpy as np
+
+    history: list[dict[str, Any]] = []
+
+    def on_episodes(rows: list[dict[str, Any]]) -> None:
+        before = len(history)
+        history.extend(rows)
+        if len(history) // every == before // every:
+            return
+        recent = history[-window:]
+        run.log_metrics(
+            {
+                "return": float(np.mean([r["return"] for r in recent])),
+                "success_rate": float(np.mean([r["success"] for r in recent])),
+                "collision_rate": float(np.mean([r["collision"] for r in recent])),
+                "timeout_rate": float(np.mean([r["timeout"] for r in recent])),
+                "length": float(np.mean([r["length"] for r in recent])),
+                "epsilon": float(recent[-1]["epsilon"]),
+            },
+            step=len(history),
+        )
+
+    return on_episodes
+
+
+@app.command("train-agent")
+@friendly_errors
+def train_agent_command(
+    variant: Annotated[str, typer.Option(help="Agent variant (see `agent` in params.yaml).")],
+    seed: Annotated[int, typer.Option(min=0, help="Training seed.")] = 0,
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    vae: Annotated[Path, typer.Option(help="Frozen VAE.")] = Path("models/vae.pt"),
+    lstm: Annotated[Path, typer.Option(help="Frozen LSTM.")] = Path("models/lstm.pt"),
+    out_dir: Annotated[
+        Path, typer.Option(help="Agents folder: writes {variant}/seed-{seed}.pt.")
+    ] = Path("models/agents"),
+    log_dir: Annotated[
+        Path, typer.Option(help="Training logs: writes {variant}/seed-{seed}.parquet.")
+    ] = Path("data/training"),
+    metrics_dir: Annotated[
+        Path, typer.Option(help="Summary metrics: writes {variant}/seed-{seed}.json.")
+    ] = Path("metrics/agents"),
+    checkpoint_dir: Annotated[
+        Path, typer.Option(help="Resumable checkpoints (one file per distinct run).")
+    ] = Path("checkpoints"),
+    resume: Annotated[
+        bool, typer.Option(help="Continue from this run's last checkpoint, if there is one.")
+    ] = False,
+    keep_checkpoint: Annotated[
+        bool, typer.Option(help="Keep the checkpoint after the agent file is written.")
+    ] = False,
+    device: DeviceOption = None,
+    no_tracking: NoTrackingOption = False,
+    quiet: QuietOption = False,
+) -> None:
+    """Train one Dueling DQN variant with one seed on the frozen world model (stage
+    `train-agent`)."""
+    from pipeline.agents.params import check_variant
+
+    check_variant(variant)
+    import numpy as np
+
+    from pipeline.agents.dqn import (
+        agent_from_result,
+        checkpoint_file,
+        evaluate_agent,
+        run_identity,
+        save_agent,
+        train_agent,
+        training_metrics,
+        validation_seed,
+        write_training_log,
+    )
+    from pipeline.config import save_resolved
+    from pipeline.io import write_json_atomic
+
+    name = f"{variant}/seed-{seed}"
+    with _stage(f"train-agent/{name}", params_path, overrides, no_tracking, ("env", "agent")) as (
+        params,
+        run,
+    ):
+        params = _with_device(params, "agent", device)
+        p = params.agent
+        identity = run_identity(variant, p, params.env, seed, vae, lstm)
+        checkpoint = checkpoint_file(checkpoint_dir, identity)
+        if resume and checkpoint.exists():
+            typer.echo(f"resuming from {checkpoint}", err=True)
+        run.set_tag("variant", variant)
+        run.set_tag("training_seed", seed)
+        result = train_agent(
+            variant,
+            p,
+            params.env,
+            vae,
+            lstm,
+            seed=seed,
+            checkpoint_path=checkpoint,
+            resume=resume,
+            on_episodes=_training_logger(
+                run, every=max(1, min(50, p.episodes // 10)), window=p.solved_window
+            ),
+            quiet=quiet,
+        )
+        greedy = evaluate_agent(
+            agent_from_result(result),
+            params.env,
+            seed=validation_seed(seed),
+            scenario_ids=np.arange(p.eval_episodes),
+        )
+        summary = training_metrics(result, greedy)
+        out = out_dir / variant / f"seed-{seed}.pt"
+        save_agent(out, result, extra={"metrics": summary})
+        save_resolved(params, _config_path(out))
+        write_training_log(result.episodes, log_dir / variant / f"seed-{seed}.parquet")
+        write_json_atomic(metrics_dir / variant / f"seed-{seed}.json", summary)
+        run.log_metrics({k: float(v) for k, v in summary.items() if v is not None})
+        run.log_artifact(out)
+        run.log_artifact(_config_path(out))
+        if not keep_checkpoint:
+            checkpoint.unlink(missing_ok=True)
+    solved = summary["episodes_to_solve"]
+    typer.echo(
+        f"wrote {out}: greedy success {summary['greedy_success_rate']:.1%} on "
+        f"{len(greedy)} validation scenarios; solved at episode {solved or 'never'}; "
+        f"{result.env_steps:,} env steps, {result.updates:,} updates in "
+        f"{result.wall_time / 60:.1f} min"
+    )
+
+
+# --------------------------------------------------------------------------- evaluation
+@app.command()
+@friendly_errors
+def evaluate(
+    method: Annotated[str, typer.Option(help="An agent variant, orca or sfm.")],
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    agents_dir: Annotated[
+        Path, typer.Option(help="Agents folder: reads {variant}/seed-{seed}.pt.")
+    ] = Path("models/agents"),
+    out_dir: Annotated[
+        Path, typer.Option(help="Writes {method}.parquet and {method}-trajectories.parquet.")
+    ] = Path("data/eval"),
+    metrics_dir: Annotated[Path, typer.Option(help="Writes {method}.json.")] = Path("metrics/eval"),
+    device: DeviceOption = None,
+    no_tracking: NoTrackingOption = False,
+    quiet: QuietOption = False,
+) -> None:
+    """Run one method greedily on the test scenarios, every training seed of an agent
+    (`experiment.seeds`) (stage `evaluate`)."""
+    from pipeline.evaluation.evaluate import (
+        AGENT_METHODS,
+        BASELINE_METHODS,
+        METHODS,
+        evaluate_method,
+        evaluation_metrics,
+        write_evaluation,
+    )
+
+    if method not in METHODS:
+        raise UserError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
+    sections = ("env", "eval", "experiment", "baselines")
+    with _stage(f"evaluate/{method}", params_path, overrides, no_tracking, sections) as (
+        params,
+        run,
+    ):
+        params = _with_device(params, "eval", device)
+        agent_paths = None
+        if method in AGENT_METHODS:
+            agent_paths = {s: agents_dir / method / f"seed-{s}.pt" for s in params.experiment.seeds}
+            for s, path in agent_paths.items():
+                if not path.is_file():
+                    raise UserError(
+                        f"{path}: no such agent file (train it: socnav-wm train-agent "
+                        f"--variant {method} --seed {s})"
+                    )
+        overrides_of = getattr(params.baselines, method) if method in BASELINE_METHODS else None
+        result = evaluate_method(
+            method,
+            env_params=params.env,
+            scenario_seed=params.eval.scenario_seed,
+            episodes=params.eval.episodes,
+            agent_paths=agent_paths,
+            baseline_overrides=overrides_of,
+            device=params.eval.device,
+            batch_size=params.eval.batch_size,
+            quiet=quiet,
+        )
+        episodes_path = out_dir / f"{method}.parquet"
+        metrics_path = metrics_dir / f"{method}.json"
+        write_evaluation(
+            result, episodes_path, out_dir / f"{method}-trajectories.parquet", metrics_path
+        )
+        content = evaluation_metrics(result)
+        run.set_tag("method", method)
+        run.log_metrics({m: v["mean"] for m, v in content["metrics"].items()})
+        run.log_metrics({f"{m}_ci_low": v["low"] for m, v in content["metrics"].items()})
+        run.log_metrics({f"{m}_ci_high": v["high"] for m, v in content["metrics"].items()})
+        run.log_metrics({"wall_time_s": result.wall_time})
+        run.log_artifact(metrics_path)
+    success = content["metrics"]["success"]
+    typer.echo(
+        f"wrote {episodes_path}: {method} success {success['mean']:.1%} "
+        f"[{success['low']:.1%}, {success['high']:.1%}] over {result.num_scenarios} scenarios "
+        f"x {len(result.training_seeds)} seed(s) in {result.wall_time:.0f} s"
+    )
+
+
+@app.command()
+@friendly_errors
+def report(
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    eval_dir: Annotated[Path, typer.Option(help="Evaluation files.")] = Path("data/eval"),
+    training_dir: Annotated[Path, typer.Option(help="Training logs.")] = Path("data/training"),
+    out_dir: Annotated[Path, typer.Option(help="Report folder.")] = Path("reports"),
+    metrics: Annotated[Path, typer.Option(help="Machine-readable summary (JSON).")] = Path(
+        "metrics/report.json"
+    ),
+    no_tracking: NoTrackingOption = False,
+) -> None:
+    """Table, paired tests, Pareto set, figures and the paper's claims checked (stage
+    `report`)."""
+    from pipeline.evaluation.report import build_report
+
+    sections = ("env", "eval", "report", "agent")
+    with _stage("report", params_path, overrides, no_tracking, sections) as (params, run):
+        r = params.report
+        result = build_report(
+            eval_dir,
+            training_dir,
+            out_dir,
+            metrics,
+            env_params=params.env,
+            scenario_seed=params.eval.scenario_seed,
+            reference=r.reference,
+            gif_scenarios=tuple(r.gif_scenarios),
+            smoothing_window=r.smoothing_window,
+            solved_window=params.agent.solved_window,
+            solved_success_rate=params.agent.solved_success_rate,
+            alpha=r.alpha,
+        )
+        for claim, verdict in result.verdicts.items():
+            run.set_tag(f"claim.{claim}", verdict)
+        run.set_tag("methods", ",".join(result.present))
+        for path in (result.summary_path, result.pareto_path, result.claims_path, *result.figures):
+            run.log_artifact(path, "figures" if path in result.figures else None)
+    missing = f"; missing: {', '.join(result.absent)}" if result.absent else ""
+    typer.echo(f"wrote {result.summary_path} ({len(result.present)} methods{missing})")
+
+
 # --------------------------------------------------------------------------- render
 @app.command()
 @friendly_errors
@@ -377,6 +637,58 @@ def bench_collect_command(
         rows,
         f"socnav-wm bench collect ({where})",
         {"seconds": ".2f", "steps_per_s": ",.0f", "parquet_mb": ".1f"},
+    )
+
+
+@bench_app.command("train")
+@friendly_errors
+def bench_train_command(
+    variant: Annotated[
+        list[str] | None, typer.Option(help="Variants (repeatable; default: all five).")
+    ] = None,
+    num_envs: Annotated[int, typer.Option(min=1, help="Environments stepped together.")] = 64,
+    batch_size: Annotated[int, typer.Option(min=1, help="Transitions per update.")] = 64,
+    seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per rate (s).")] = 3.0,
+    device: Annotated[str, typer.Option(help="cpu, cuda or auto.")] = "cpu",
+    hidden_features: Annotated[
+        bool, typer.Option(help="2stepahead-maspm on hidden states (the original code).")
+    ] = False,
+    horizon: Annotated[int, typer.Option(min=1, help="Imagined steps of the k-step variants.")] = 2,
+) -> None:
+    """Env-steps/s (act + simulate + world-model features + store) and gradient updates/s of
+    the DQN learner, per variant, with a random world model of the paper's sizes."""
+    from pipeline.agents.dqn import bench_train
+    from pipeline.agents.params import VARIANT_NAMES, check_variant
+
+    if device not in ("auto", "cpu", "cuda"):
+        raise UserError(f"--device: must be one of auto, cpu, cuda, got {device!r}")
+    names = [check_variant(v) for v in variant or VARIANT_NAMES]
+    import torch
+
+    rows = []
+    for name in names:
+        r = bench_train(
+            name,
+            num_envs=num_envs,
+            batch_size=batch_size,
+            seconds=seconds,
+            device=device,
+            hidden_features=hidden_features,
+            horizon=horizon,
+        )
+        rows.append(
+            {
+                "variant": name,
+                "features": r["feature_dim"],
+                "env_steps_per_s": r["env_steps_per_s"],
+                "updates_per_s": r["updates_per_s"],
+            }
+        )
+    _print_table(
+        rows,
+        f"socnav-wm bench train ({device}, {torch.get_num_threads()} torch threads, "
+        f"{num_envs} envs, batch {batch_size}, {seconds:g} s per rate)",
+        {"features": "d", "env_steps_per_s": ",.0f", "updates_per_s": ",.0f"},
     )
 
 

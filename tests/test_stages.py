@@ -1,11 +1,14 @@
-"""The world-model stages through the CLI, on tiny params, with a real MLflow SQLite store."""
+"""Every stage through the CLI, on tiny params, with a real MLflow SQLite store."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
+import pyarrow.parquet as pq
 import pytest
+import torch
 import yaml
 from typer.testing import CliRunner
 
@@ -30,6 +33,25 @@ TINY = {
         "batch_size": 32,
         "device": "cpu",
     },
+    "agent": {
+        "episodes": 30,
+        "num_envs": 8,
+        "batch_size": 16,
+        "buffer_size": 2000,
+        "learning_starts": 64,
+        "updates_per_step": 1,
+        "trunk_sizes": [32],
+        "stream_size": 16,
+        "checkpoint_every": 10,
+        "eval_episodes": 8,
+        "solved_window": 10,
+        "solved_success_rate": 0.9,
+        "device": "cpu",
+    },
+    "experiment": {"variants": ["dueling-dqn", "2stepahead-maspm"], "seeds": [0, 1]},
+    "eval": {"episodes": 6, "scenario_seed": 5, "batch_size": 4, "device": "cpu"},
+    "baselines": {"orca": {"safety_margin": 0.2}, "sfm": {}},
+    "report": {"smoothing_window": 5, "gif_scenarios": [0, 1]},
 }
 
 runner = CliRunner()
@@ -127,3 +149,112 @@ def test_a_failed_collect_keeps_the_previous_dataset(workdir: Path) -> None:
     result = runner.invoke(app, ["collect", "--params", str(bad), "--no-tracking"])
     assert result.exit_code != 0
     assert sorted(p.name for p in (workdir / "data/rollouts").iterdir()) == before
+
+
+def _runs(stage_prefix: str) -> list:
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient()
+    experiment = client.get_experiment_by_name("socnav-wm")
+    runs = client.search_runs([experiment.experiment_id])
+    return [run for run in runs if run.data.tags["stage"].startswith(stage_prefix)]
+
+
+def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
+    for command in ("collect", "train-vae", "train-lstm"):
+        _invoke(command, "--no-tracking", "--quiet")
+    for variant in ("dueling-dqn", "2stepahead-maspm"):
+        for seed in ("0", "1"):
+            out = _invoke("train-agent", "--variant", variant, "--seed", seed, "--quiet").output
+            assert "greedy success" in out
+            assert (workdir / f"models/agents/{variant}/seed-{seed}.pt").is_file()
+            assert (workdir / f"models/agents/{variant}/seed-{seed}.params.yaml").is_file()
+            log = pq.read_table(workdir / f"data/training/{variant}/seed-{seed}.parquet")
+            assert log.num_rows == 30 and log["episode"].to_pylist() == list(range(1, 31))
+            summary = json.loads(
+                (workdir / f"metrics/agents/{variant}/seed-{seed}.json").read_text()
+            )
+            assert summary["episodes"] == 30 and summary["greedy_episodes"] == 8
+            assert summary["final_success_rate"] == pytest.approx(
+                float(np.mean(log["success"].to_numpy()[-10:]))  # agent.solved_window
+            )
+    # A finished run leaves no checkpoint behind (they hold the replay buffer).
+    assert not list((workdir / "checkpoints").rglob("*.ckpt"))
+
+    for method in ("dueling-dqn", "2stepahead-maspm", "orca", "sfm"):
+        _invoke("evaluate", "--method", method, "--quiet")
+        episodes = pq.read_table(workdir / f"data/eval/{method}.parquet")
+        seeds = {-1} if method in ("orca", "sfm") else {0, 1}
+        assert set(episodes["training_seed"].to_pylist()) == seeds
+        assert episodes.num_rows == 6 * len(seeds)
+        assert (workdir / f"data/eval/{method}-trajectories.parquet").is_file()
+        metrics = json.loads((workdir / f"metrics/eval/{method}.json").read_text())
+        success = metrics["metrics"]["success"]
+        assert success["mean"] == pytest.approx(float(np.mean(episodes["success"].to_numpy())))
+
+    out = _invoke("report").output
+    assert "missing: wm-dueling-dqn, 2stepahead, maspm" in out
+    for path in ("summary.md", "pareto.json", "claims.json", "figures/histograms.png",
+                 "figures/training_curves.png", "figures/scenarios.gif"):  # fmt: skip
+        assert (workdir / "reports" / path).is_file(), path
+    report = json.loads((workdir / "metrics/report.json").read_text())
+    assert report["methods_present"] == ["dueling-dqn", "2stepahead-maspm", "orca", "sfm"]
+
+    # MLflow: one run per agent and seed, one per evaluated method, and the report's.
+    agents = _runs("train-agent/")
+    assert sorted(r.data.tags["stage"] for r in agents) == [
+        "train-agent/2stepahead-maspm/seed-0", "train-agent/2stepahead-maspm/seed-1",
+        "train-agent/dueling-dqn/seed-0", "train-agent/dueling-dqn/seed-1",
+    ]  # fmt: skip
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient()
+    run = agents[0]
+    assert client.get_metric_history(run.info.run_id, "success_rate")
+    assert "greedy_success_rate" in run.data.metrics
+    evaluations = {r.data.tags["method"]: r for r in _runs("evaluate/")}
+    assert set(evaluations) == {"dueling-dqn", "2stepahead-maspm", "orca", "sfm"}
+    assert "success" in evaluations["orca"].data.metrics
+    (report_run,) = _runs("report")
+    assert any(k.startswith("claim.") for k in report_run.data.tags)
+    figures = {a.path for a in client.list_artifacts(report_run.info.run_id, "figures")}
+    assert "figures/histograms.png" in figures
+
+
+def test_train_agent_resumes_its_own_checkpoint(workdir: Path) -> None:
+    args = ("train-agent", "--variant", "dueling-dqn", "--no-tracking", "--quiet")
+    _invoke(*args, "--keep-checkpoint")
+    (checkpoint,) = (workdir / "checkpoints/dueling-dqn").glob("seed-0-*.ckpt")
+    first = torch.load(workdir / "models/agents/dueling-dqn/seed-0.pt", weights_only=True)
+    resumed = _invoke(*args, "--resume")
+    assert f"resuming from {checkpoint.relative_to(workdir)}" in resumed.output
+    assert not checkpoint.exists()
+    second = torch.load(workdir / "models/agents/dueling-dqn/seed-0.pt", weights_only=True)
+    for key, value in first["q_network"]["state_dict"].items():
+        assert torch.equal(value, second["q_network"]["state_dict"][key]), key
+    # Another parameter value is another run: its checkpoint has another name.
+    _invoke(*args, "--keep-checkpoint", "--set", "agent.gamma=0.9")
+    (other,) = (workdir / "checkpoints/dueling-dqn").glob("seed-0-*.ckpt")
+    assert other.name != checkpoint.name
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["train-agent", "--variant", "dqn"], "unknown 'dqn'"),
+        (["train-agent", "--variant", "maspm", "--vae", "no.pt"], "no.pt"),
+        (["train-agent", "--variant", "maspm", "--set", "agent.gamma=2"], "agent.gamma"),
+        (["evaluate", "--method", "astar"], "--method: unknown 'astar'"),
+        (["evaluate", "--method", "maspm"], "models/agents/maspm/seed-0.pt: no such agent file"),
+        (["evaluate", "--method", "orca", "--set", "baselines.orca={radius: 1}"], "radius"),
+        (["report", "--set", "report.reference=me"], "report.reference"),
+        (["bench", "train", "--variant", "dqn"], "unknown 'dqn'"),
+    ],
+)
+def test_agent_and_evaluation_commands_reject_bad_input(
+    workdir: Path, args: list[str], message: str
+) -> None:
+    result = runner.invoke(app, [*args, "--no-tracking"] if args[0] != "bench" else args)
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
