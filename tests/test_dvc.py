@@ -1,4 +1,4 @@
-"""`dvc repro` of the world-model stages in a temporary copy of the repository, tiny params."""
+"""`dvc repro` of the whole pipeline in a temporary copy of the repository, tiny params."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def _dvc(repo: Path, *args: str) -> str:
     return result.stdout + result.stderr
 
 
-def test_dvc_repro_runs_the_world_model_stages_and_reruns_only_what_changed(repo: Path) -> None:
+def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) -> None:
     _dvc(repo, "repro", "train_lstm")
     for path in ("data/rollouts", "models/vae.pt", "models/lstm.pt", "metrics/lstm.json"):
         assert (repo / path).exists(), path
@@ -82,3 +82,31 @@ def test_dvc_repro_runs_the_world_model_stages_and_reruns_only_what_changed(repo
 
     shown = _dvc(repo, "metrics", "show")
     assert "one_step_mse" in shown and "val_recon_mse" in shown
+
+    # The whole pipeline: agents × seeds, the evaluations, the report.
+    output = _dvc(repo, "repro")
+    assert "Running stage 'train_agent@2stepahead-maspm-1'" in output
+    assert "Running stage 'evaluate_baseline@sfm'" in output
+    outputs = (
+        "models/agents/dueling-dqn/seed-0.pt",
+        "data/training/dueling-dqn/seed-1.parquet",
+        "data/eval/2stepahead-maspm.parquet",
+        "data/eval/orca-trajectories.parquet",
+        "reports/summary.md",
+        "reports/figures/histograms.png",
+        "metrics/report.json",
+    )
+    for path in outputs:
+        assert (repo / path).exists(), path
+    shown = _dvc(repo, "metrics", "show")
+    assert "metrics/eval/orca.json" in shown and "greedy_success_rate" in shown
+    _dvc(repo, "plots", "show", "--out", str(repo / "plots"))
+    assert (repo / "plots" / "index.html").is_file()
+
+    # A test-scenario parameter reruns the evaluations and the report, never the training.
+    params = yaml.safe_load((repo / "params.yaml").read_text())
+    params["eval"]["episodes"] = 4
+    (repo / "params.yaml").write_text(yaml.safe_dump(params))
+    output = _dvc(repo, "repro")
+    assert "Running stage 'evaluate@dueling-dqn'" in output and "Running stage 'report'" in output
+    assert "Running stage 'train_agent" not in output
