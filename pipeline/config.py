@@ -19,7 +19,7 @@ import re
 import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -197,6 +197,12 @@ class ReportParams(BaseModel):
 
     reference: str = "dueling-dqn"
     """The method every other is compared with, scenario by scenario."""
+    alpha: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
+    """Family-wise error rate of the paired tests (Holm-corrected)."""
+    smoothing_window: int = Field(100, gt=0)
+    """Rolling-mean window of the training curves (episodes)."""
+    gif_scenarios: list[Annotated[int, Field(ge=0)]] = Field(default_factory=lambda: [0, 1, 2])
+    """Test scenarios shown side by side in reports/figures/scenarios.gif (empty: no GIF)."""
 
     @field_validator("reference")
     @classmethod
@@ -205,13 +211,6 @@ class ReportParams(BaseModel):
         if value not in methods:
             raise ValueError(f"unknown method {value!r}; expected one of {', '.join(methods)}")
         return value
-
-    alpha: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
-    """Family-wise error rate of the paired tests (Holm-corrected)."""
-    smoothing_window: int = Field(100, gt=0)
-    """Rolling-mean window of the training curves (episodes)."""
-    gif_scenarios: list[int] = Field(default_factory=lambda: [0, 1, 2])
-    """Test scenarios shown side by side in reports/figures/scenarios.gif (empty: no GIF)."""
 
 
 _ENV_TYPES: dict[str, Any] = typing.get_type_hints(EnvParams)
