@@ -106,11 +106,16 @@ def _stage(
         yield params, run
 
 
+def _check_device(device: str) -> str:
+    if device not in ("auto", "cpu", "cuda"):
+        raise UserError(f"--device: must be one of auto, cpu, cuda, got {device!r}")
+    return device
+
+
 def _with_device(params: Any, section: str, device: str | None) -> Any:
     if device is None:
         return params
-    if device not in ("auto", "cpu", "cuda"):
-        raise UserError(f"--device: must be one of auto, cpu, cuda, got {device!r}")
+    _check_device(device)
     current = getattr(params, section)
     if dataclasses.is_dataclass(current):  # the agent section is a stdlib dataclass
         updated = dataclasses.replace(current, device=device)
@@ -660,8 +665,7 @@ def bench_train_command(
     from pipeline.agents.dqn import bench_train
     from pipeline.agents.params import VARIANT_NAMES, check_variant
 
-    if device not in ("auto", "cpu", "cuda"):
-        raise UserError(f"--device: must be one of auto, cpu, cuda, got {device!r}")
+    _check_device(device)
     names = [check_variant(v) for v in variant or VARIANT_NAMES]
     import torch
 
