@@ -24,7 +24,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from pipeline.agents.params import VARIANT_NAMES, AgentParams
+from pipeline.agents.params import METHOD_NAMES, VARIANT_NAMES, AgentParams
 from pipeline.env.params import EnvParams
 from pipeline.io import atomic_path
 
@@ -207,9 +207,8 @@ class ReportParams(BaseModel):
     @field_validator("reference")
     @classmethod
     def _known_method(cls, value: str) -> str:
-        methods = (*VARIANT_NAMES, "orca", "sfm")
-        if value not in methods:
-            raise ValueError(f"unknown method {value!r}; expected one of {', '.join(methods)}")
+        if value not in METHOD_NAMES:
+            raise ValueError(f"unknown method {value!r}; expected one of {', '.join(METHOD_NAMES)}")
         return value
 
 

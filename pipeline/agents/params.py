@@ -27,6 +27,13 @@ VARIANT_NAMES: tuple[str, ...] = (
 WORLD_MODEL_VARIANTS: tuple[str, ...] = VARIANT_NAMES[1:]
 """The variants that need the frozen VAE and LSTM."""
 
+BASELINE_NAMES: tuple[str, ...] = ("orca", "sfm")
+"""The two classic controllers evaluated next to the agents (:mod:`pipeline.agents.baselines`)."""
+
+METHOD_NAMES: tuple[str, ...] = (*VARIANT_NAMES, *BASELINE_NAMES)
+"""Every evaluated method: the agents (paper order), then the baselines. Listed here, in a
+module without torch, so that the configuration can check method names cheaply."""
+
 
 def check_variant(name: str) -> str:
     """``name`` if it is a known variant, else a one-line ValueError listing the valid names."""

@@ -36,7 +36,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from pipeline.agents.params import VARIANT_NAMES
+from pipeline.agents.params import BASELINE_NAMES, METHOD_NAMES, VARIANT_NAMES
 from pipeline.env.params import EnvParams
 from pipeline.env.rollout import Episode, run_episodes
 from pipeline.evaluation.stats import mean_ci_crossed
@@ -73,21 +73,13 @@ __all__ = [
     "write_evaluation",
 ]
 
-METHODS: tuple[str, ...] = (
-    "dueling-dqn",
-    "wm-dueling-dqn",
-    "2stepahead",
-    "maspm",
-    "2stepahead-maspm",
-    "orca",
-    "sfm",
-)
+METHODS: tuple[str, ...] = METHOD_NAMES
 """The seven methods, agents first (paper order), then the baselines."""
 
 AGENT_METHODS: tuple[str, ...] = VARIANT_NAMES
 """The five learned methods (one agent file per training seed)."""
 
-BASELINE_METHODS: tuple[str, ...] = ("orca", "sfm")
+BASELINE_METHODS: tuple[str, ...] = BASELINE_NAMES
 """The two classic controllers (deterministic: evaluated once)."""
 
 BASELINE_SEED = -1
