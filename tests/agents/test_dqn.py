@@ -104,6 +104,57 @@ def test_one_update_takes_a_gradient_step_and_a_polyak_step() -> None:
         torch.testing.assert_close(target_after[key], expected)
 
 
+@pytest.mark.parametrize(
+    ("optimizer", "grad_clip", "huber"),
+    [("adam", 0.05, False), ("adamw", 0.0, True), ("adam", 100.0, False)],
+)
+def test_flat_update_matches_the_per_layer_textbook_update(
+    optimizer: str, grad_clip: float, huber: bool
+) -> None:
+    """The learner keeps its weights, gradients and target in flat buffers for speed; five
+    updates must give what per-layer Adam, clip_grad_norm_ and Polyak averaging give."""
+    import copy
+
+    import torch.nn.functional as F
+
+    torch.manual_seed(0)
+    params = dataclasses.replace(
+        TINY, optimizer=optimizer, grad_clip=grad_clip, huber=huber, weight_decay=0.01,
+        learning_rate=1e-2,
+    )  # fmt: skip
+    learner = DQNLearner(5, params, torch.device("cpu"))
+    online = copy.deepcopy(learner.q_network)  # ordinary, separate parameters
+    target = copy.deepcopy(learner.target_network)
+    kind = torch.optim.AdamW if optimizer == "adamw" else torch.optim.Adam
+    reference = kind(online.parameters(), lr=1e-2, weight_decay=0.01)
+    clipped = False
+    for _ in range(5):
+        batch = Batch(
+            torch.randn(16, 5), torch.randint(0, 4, (16,)), torch.randn(16), torch.randn(16, 5),
+            (torch.rand(16) < 0.2).float(), torch.full((16,), 0.95),
+        )  # fmt: skip
+        learner.update(batch)
+        with torch.no_grad():
+            y = double_dqn_targets(
+                batch.rewards, batch.terminals, online(batch.next_features),
+                target(batch.next_features), batch.discounts,
+            )  # fmt: skip
+        q = online(batch.features).gather(1, batch.actions.unsqueeze(1)).squeeze(1)
+        reference.zero_grad()
+        (F.smooth_l1_loss(q, y) if huber else F.mse_loss(q, y)).backward()
+        if grad_clip > 0:
+            norm = torch.nn.utils.clip_grad_norm_(online.parameters(), grad_clip)
+            clipped |= bool(norm > grad_clip)
+        reference.step()
+        with torch.no_grad():
+            for t, o in zip(target.parameters(), online.parameters(), strict=True):
+                t.mul_(params.polyak).add_(o, alpha=1 - params.polyak)
+    assert clipped == (grad_clip == 0.05)  # the small clip did bite, the large one did not
+    for mine, theirs in ((learner.q_network, online), (learner.target_network, target)):
+        for key, value in theirs.state_dict().items():
+            torch.testing.assert_close(mine.state_dict()[key], value, rtol=1e-4, atol=1e-6)
+
+
 def test_episodes_to_solve_by_hand() -> None:
     success = [0, 1, 1, 0, 1, 1, 1, 1]
     # Windows of 4: [0,1,1,0] .5, [1,1,0,1] .75 (ends at episode 5), …
