@@ -124,9 +124,9 @@ def flatten_parameters(module: torch.nn.Module) -> torch.Tensor:
     """Move every parameter of ``module`` into one contiguous buffer; returns the buffer.
 
     Each parameter becomes a view of its slice, so the module computes as before while
-    element-wise work over all of its weights (optimiser step, gradient norm, Polyak averaging,
-    zeroing) is one call on one tensor instead of one per layer: on the CPU, per-tensor dispatch
-    was over a third of an update of these small networks.
+    element-wise work over all of its weights (optimiser step, gradient norm, Polyak averaging)
+    is one call on one tensor instead of one per layer: on the CPU, per-tensor dispatch was a
+    large share of an update of these small networks.
     """
     params = list(module.parameters())
     flat = torch.cat([param.detach().reshape(-1) for param in params])
@@ -155,8 +155,7 @@ class DQNLearner:
         self.target_network = copy.deepcopy(self.q_network).requires_grad_(False)
         self._weights = flatten_parameters(self.q_network)
         self._target_weights = flatten_parameters(self.target_network)
-        # Gradients accumulate in place into views of one buffer (autograd adds into an
-        # existing .grad), which is zeroed before each backward pass.
+        # Each parameter's .grad is a view of one buffer, which the backward pass overwrites.
         self._grads = torch.zeros_like(self._weights)
         offset = 0
         for param in self.q_network.parameters():
@@ -186,30 +185,42 @@ class DQNLearner:
         greedy = self.q_network(features).argmax(dim=1).cpu().numpy()
         return np.where(explore, random_actions, greedy)
 
+    @torch.no_grad()
     def update(self, batch: Batch) -> torch.Tensor:
-        """One gradient step on a batch, then the Polyak target update; returns the loss."""
+        """One gradient step on a batch, then the Polyak target update; returns the loss.
+
+        The gradient comes from the network's hand-written backward pass
+        (:meth:`DuelingQNetwork.backward_cached`, tested against autograd), straight into the
+        flat gradient buffer.
+        """
         p = self.params
-        with torch.no_grad():
-            targets = double_dqn_targets(
-                batch.rewards,
-                batch.terminals,
-                self.q_network(batch.next_features),
-                self.target_network(batch.next_features),
-                batch.discounts,
-            )
-        q = self.q_network(batch.features).gather(1, batch.actions.unsqueeze(1)).squeeze(1)
-        loss = F.smooth_l1_loss(q, targets) if p.huber else F.mse_loss(q, targets)
-        self._grads.zero_()
-        loss.backward()
-        with torch.no_grad():
-            if p.grad_clip > 0:
-                # clip_grad_norm_ on the one buffer: scale by min(1, max_norm / (‖g‖ + 1e-6)).
-                norm = torch.linalg.vector_norm(self._grads)
-                self._grads.mul_((p.grad_clip / (norm + 1e-6)).clamp_(max=1.0))
-            self.optimizer.step()
-            # θ′ ← θ′ + (1 − p)(θ − θ′) = p·θ′ + (1 − p)·θ, the whole network in one call.
-            self._target_weights.lerp_(self._weights, 1.0 - p.polyak)
-        return loss.detach()
+        targets = double_dqn_targets(
+            batch.rewards,
+            batch.terminals,
+            self.q_network(batch.next_features),
+            self.target_network(batch.next_features),
+            batch.discounts,
+        )
+        q_values, cache = self.q_network.forward_cached(batch.features)
+        taken = batch.actions.unsqueeze(1)
+        error = q_values.gather(1, taken).squeeze(1) - targets
+        # The loss is the mean over the batch of ℓ(error); d(loss)/d(error) by hand.
+        if p.huber:  # smooth L1 with β = 1
+            loss = F.smooth_l1_loss(error, torch.zeros_like(error))
+            grad_error = error.clamp(-1.0, 1.0) / error.numel()
+        else:
+            loss = error.square().mean()
+            grad_error = error * (2.0 / error.numel())
+        grad_q = torch.zeros_like(q_values).scatter_(1, taken, grad_error.unsqueeze(1))
+        self.q_network.backward_cached(cache, grad_q)
+        if p.grad_clip > 0:
+            # clip_grad_norm_ on the one buffer: scale by min(1, max_norm / (‖g‖ + 1e-6)).
+            norm = torch.linalg.vector_norm(self._grads)
+            self._grads.mul_((p.grad_clip / (norm + 1e-6)).clamp_(max=1.0))
+        self.optimizer.step()
+        # θ′ ← θ′ + (1 − p)(θ − θ′) = p·θ′ + (1 − p)·θ, the whole network in one call.
+        self._target_weights.lerp_(self._weights, 1.0 - p.polyak)
+        return loss
 
     def state_dict(self) -> dict[str, Any]:
         return {

@@ -1,4 +1,4 @@
-"""The Dueling Q-network: aggregation by hand, architecture, initialisation."""
+"""The Dueling Q-network: aggregation by hand, architecture, init, hand-written backward."""
 
 import pytest
 import torch
@@ -55,3 +55,26 @@ def test_xavier_init_with_zero_biases_and_seeded() -> None:
 def test_needs_a_trunk_layer() -> None:
     with pytest.raises(ValueError, match="trunk_sizes"):
         DuelingQNetwork(4, trunk_sizes=())
+
+
+@pytest.mark.parametrize(("trunk", "stream", "actions"), [((512, 128), 128, 4), ((7,), 5, 3)])
+def test_hand_written_backward_equals_autograd(
+    trunk: tuple[int, ...], stream: int, actions: int
+) -> None:
+    torch.manual_seed(3)
+    net = DuelingQNetwork(11, actions, trunk, stream)
+    features = torch.randn(32, 11)
+    grad_q = torch.randn(32, actions)
+
+    q_values, cache = net.forward_cached(features)
+    (q_values * grad_q).sum().backward()  # d/dQ of this scalar is grad_q
+    expected = {name: param.grad.clone() for name, param in net.named_parameters()}
+    torch.testing.assert_close(q_values, net(features))
+
+    for param in net.parameters():
+        param.grad = torch.full_like(param, 123.0)  # overwritten, not accumulated into
+    with torch.no_grad():
+        _, cache = net.forward_cached(features)
+    net.backward_cached(cache, grad_q)
+    for name, param in net.named_parameters():
+        torch.testing.assert_close(param.grad, expected[name], rtol=1e-5, atol=1e-6, msg=name)
