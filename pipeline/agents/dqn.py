@@ -388,10 +388,13 @@ def run_identity(
 
     ``params`` are resolved for the variant (the ``paper`` preset applied); the world model
     enters by the content of its files, so retraining the VAE or LSTM invalidates checkpoints.
+    The checkpoint format version is part of it too: a checkpoint written by an older version
+    of this code has another file name, and a run started by newer code begins afresh.
     """
     p = params.resolved(variant)
     world = VARIANTS[check_variant(variant)].needs_world_model
     return {
+        "checkpoint_format": CHECKPOINT_FORMAT_VERSION,
         "variant": variant,
         "params": p.to_dict(),
         "env_params": env_params.to_dict(),
