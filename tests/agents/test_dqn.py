@@ -1,12 +1,14 @@
 """The DQN learner: update rule by hand, hyper-parameters, the training loop on the real
 simulator (learning, determinism, resume), agent files, evaluation and the benchmark."""
 
+import copy
 import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from pipeline.agents.dqn import (
     EPISODE_COLUMNS,
@@ -113,10 +115,6 @@ def test_flat_update_matches_the_per_layer_textbook_update(
 ) -> None:
     """The learner keeps its weights, gradients and target in flat buffers for speed; five
     updates must give what per-layer Adam, clip_grad_norm_ and Polyak averaging give."""
-    import copy
-
-    import torch.nn.functional as F
-
     torch.manual_seed(0)
     params = dataclasses.replace(
         TINY, optimizer=optimizer, grad_clip=grad_clip, huber=huber, weight_decay=0.01,
