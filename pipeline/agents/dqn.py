@@ -120,6 +120,15 @@ def double_dqn_targets(
     return rewards + discounts * next_value * (1.0 - terminals)
 
 
+def flat_views(flat: torch.Tensor, params: Sequence[torch.Tensor]) -> list[torch.Tensor]:
+    """Consecutive slices of the 1-d ``flat``, shaped like ``params`` (views, no copies)."""
+    views, offset = [], 0
+    for param in params:
+        views.append(flat[offset : offset + param.numel()].view_as(param))
+        offset += param.numel()
+    return views
+
+
 def flatten_parameters(module: torch.nn.Module) -> torch.Tensor:
     """Move every parameter of ``module`` into one contiguous buffer; returns the buffer.
 
@@ -130,10 +139,8 @@ def flatten_parameters(module: torch.nn.Module) -> torch.Tensor:
     """
     params = list(module.parameters())
     flat = torch.cat([param.detach().reshape(-1) for param in params])
-    offset = 0
-    for param in params:
-        param.data = flat[offset : offset + param.numel()].view_as(param)
-        offset += param.numel()
+    for param, view in zip(params, flat_views(flat, params), strict=True):
+        param.data = view
     return flat
 
 
@@ -157,10 +164,9 @@ class DQNLearner:
         self._target_weights = flatten_parameters(self.target_network)
         # Each parameter's .grad is a view of one buffer, which the backward pass overwrites.
         self._grads = torch.zeros_like(self._weights)
-        offset = 0
-        for param in self.q_network.parameters():
-            param.grad = self._grads[offset : offset + param.numel()].view_as(param)
-            offset += param.numel()
+        online = list(self.q_network.parameters())
+        for param, view in zip(online, flat_views(self._grads, online), strict=True):
+            param.grad = view
         self._weights.grad = self._grads
         optimizer_type = torch.optim.AdamW if params.optimizer == "adamw" else torch.optim.Adam
         self.optimizer = optimizer_type(
