@@ -659,6 +659,9 @@ def bench_train_command(
         bool, typer.Option(help="2stepahead-maspm on hidden states (the original code).")
     ] = False,
     horizon: Annotated[int, typer.Option(min=1, help="Imagined steps of the k-step variants.")] = 2,
+    decode_latents: Annotated[
+        bool, typer.Option(help="Latents decoded into observations (agent.decode_latents).")
+    ] = False,
 ) -> None:
     """Env-steps/s (act + simulate + world-model features + store) and gradient updates/s of
     the DQN learner, per variant, with a random world model of the paper's sizes."""
@@ -679,6 +682,7 @@ def bench_train_command(
             device=device,
             hidden_features=hidden_features,
             horizon=horizon,
+            decode_latents=decode_latents,
         )
         rows.append(
             {

@@ -322,6 +322,7 @@ def variant_for(
         hidden_features=params.maspm_hidden_features,
         carry_imagined=params.carry_imagined,
         sort_humans=params.sort_humans,
+        decode_latents=params.decode_latents,
     )
 
 
@@ -946,6 +947,7 @@ def bench_train(
     env_params: EnvParams | None = None,
     hidden_features: bool = False,
     horizon: int = 2,
+    decode_latents: bool = False,
 ) -> dict[str, Any]:
     """Env-steps/s (acting + simulator + features + storing) and gradient updates/s, measured
     separately, with a random-initialised world model of the paper's sizes.
@@ -964,6 +966,7 @@ def bench_train(
         buffer_size=max(p.buffer_size, num_envs, batch_size),
         horizon=horizon,
         maspm_hidden_features=hidden_features,
+        decode_latents=decode_latents,
         device=device,
     )
     target = resolve_device(device)

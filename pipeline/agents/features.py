@@ -37,6 +37,10 @@ imagined state, as the original did).
 Q-network's input at t = 0 has the same meaning as at every other step (the paper's code instead
 fed zeros in place of ``h`` or copies of ``z``, inputs the network never saw later in an episode).
 
+With ``decode_latents`` every latent in the table (``z`` and the predicted ``ẑ``) reaches the
+Q-network as the VAE decodes it, in observation units (23 values instead of 16; hidden states
+stay as they are): the same information, in the geometry the raw observation has.
+
 With ``sort_humans`` every variant first reorders the observation's humans nearest first
 (:func:`sort_humans_by_distance`), before the VAE or the Q-network sees it.
 """
@@ -103,6 +107,9 @@ class Variant:
             (the original code's behaviour) instead of the real one.
         sort_humans: reorder the observation's human blocks nearest first before anything
             else (see :func:`sort_humans_by_distance`).
+        decode_latents: give the Q-network every latent (``z`` and the predicted ``ẑ``) as the
+            VAE decodes it, in observation units (obs_dim values each), instead of the code
+            itself (see :meth:`shown`); the LSTM hidden states are given as they are.
     """
 
     name: ClassVar[str]
@@ -119,6 +126,7 @@ class Variant:
         hidden_features: bool = False,
         carry_imagined: bool = False,
         sort_humans: bool = False,
+        decode_latents: bool = False,
     ) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"horizon: must be an integer >= 1, got {horizon!r}")
@@ -128,6 +136,7 @@ class Variant:
         self.hidden_features = bool(hidden_features)
         self.carry_imagined = bool(carry_imagined)
         self.sort_humans = bool(sort_humans)
+        self.decode_latents = bool(decode_latents)
         self.vae: VAE | None = None
         self.lstm: LatentLSTM | None = None
         self.latent_dim = 0
@@ -155,6 +164,8 @@ class Variant:
             self.lstm = lstm.to(self.device).eval().requires_grad_(False)
             self.latent_dim = lstm.latent_dim
             self.hidden_dim = lstm.hidden_dim
+        # Size of one latent as the Q-network sees it (see shown()).
+        self.shown_dim = self.obs_dim if self.decode_latents else self.latent_dim
         self.feature_dim = self._feature_dim()
         self.state: WorldModelState | None = None
         self.num_envs = 0
@@ -190,6 +201,18 @@ class Variant:
         """All-zero LSTM state for ``batch`` envs (what every episode starts from)."""
         zeros = torch.zeros(batch, self.hidden_dim, device=self.device)
         return WorldModelState(zeros, zeros.clone())
+
+    def shown(self, latents: torch.Tensor) -> torch.Tensor:
+        """Latents (..., latent_dim) as the Q-network gets them: the code itself, or with
+        ``decode_latents`` the VAE's decoding in raw observation units (..., obs_dim).
+
+        Decoding adds no information (it is a fixed function of the code); it undoes the
+        entanglement. The same learner gets 81% from the decoded current latent and 74% from
+        the latent itself (README, "Where the world-model variants lose").
+        """
+        if not self.decode_latents or self.vae is None:
+            return latents
+        return self.vae.destandardize(self.vae.decode(latents))
 
     def encode(self, obs: torch.Tensor) -> torch.Tensor:
         """Raw observations (B, obs_dim) → latents (B, latent_dim) (the VAE mean)."""
@@ -305,12 +328,12 @@ class WorldModelFeatures(Variant):
     name = "wm-dueling-dqn"
 
     def _feature_dim(self) -> int:
-        return self.latent_dim + self.hidden_dim
+        return self.shown_dim + self.hidden_dim
 
     def compute(self, z, actions, state):
         _, real = self.lstm.step(z, actions, state)
         real = WorldModelState(*real)
-        return torch.cat([z, real.h], dim=1), real
+        return torch.cat([self.shown(z), real.h], dim=1), real
 
 
 class StepAheadFeatures(Variant):
@@ -323,7 +346,7 @@ class StepAheadFeatures(Variant):
     name = "2stepahead"
 
     def _feature_dim(self) -> int:
-        return self.latent_dim + self.hidden_dim
+        return self.shown_dim + self.hidden_dim
 
     def compute(self, z, actions, state):
         predicted, real = self.lstm.step(z, actions, state)
@@ -333,7 +356,7 @@ class StepAheadFeatures(Variant):
             predicted, imagined = self.lstm.step(predicted, actions, imagined)
             imagined = WorldModelState(*imagined)
         carried = imagined if self.carry_imagined else real
-        return torch.cat([z, imagined.h], dim=1), carried
+        return torch.cat([self.shown(z), imagined.h], dim=1), carried
 
 
 class _MultiActionFeatures(Variant):
@@ -370,11 +393,11 @@ class MultiActionFeatures(_MultiActionFeatures):
     name = "maspm"
 
     def _feature_dim(self) -> int:
-        return self.latent_dim * (1 + NUM_ACTIONS)
+        return self.shown_dim * (1 + NUM_ACTIONS)
 
     def compute(self, z, actions, state):
         predicted, _, real = self._rollouts(z, actions, state, steps=1)
-        return torch.cat([z, predicted.flatten(1)], dim=1), real
+        return torch.cat([self.shown(z), self.shown(predicted).flatten(1)], dim=1), real
 
 
 class StepAheadMultiActionFeatures(_MultiActionFeatures):
@@ -387,13 +410,13 @@ class StepAheadMultiActionFeatures(_MultiActionFeatures):
     name = "2stepahead-maspm"
 
     def _feature_dim(self) -> int:
-        per_action = self.hidden_dim if self.hidden_features else self.latent_dim
-        return self.latent_dim + NUM_ACTIONS * per_action
+        per_action = self.hidden_dim if self.hidden_features else self.shown_dim
+        return self.shown_dim + NUM_ACTIONS * per_action
 
     def compute(self, z, actions, state):
         predicted, hidden, real = self._rollouts(z, actions, state, steps=self.horizon)
-        rollout = hidden if self.hidden_features else predicted
-        return torch.cat([z, rollout.flatten(1)], dim=1), real
+        rollout = hidden if self.hidden_features else self.shown(predicted)
+        return torch.cat([self.shown(z), rollout.flatten(1)], dim=1), real
 
 
 VARIANTS: dict[str, type[Variant]] = {
@@ -421,6 +444,7 @@ def make_variant(
     hidden_features: bool = False,
     carry_imagined: bool = False,
     sort_humans: bool = False,
+    decode_latents: bool = False,
 ) -> Variant:
     """Build the variant ``name`` (see :data:`VARIANTS`) around a frozen world model."""
     cls = VARIANTS[check_variant(name)]
@@ -433,4 +457,5 @@ def make_variant(
         hidden_features=hidden_features,
         carry_imagined=carry_imagined,
         sort_humans=sort_humans,
+        decode_latents=decode_latents,
     )

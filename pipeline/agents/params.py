@@ -123,6 +123,10 @@ class AgentParams:
     instead of the predicted latents (80-d)."""
     carry_imagined: bool = False
     """`2stepahead`: carry the imagined LSTM state to the next real step (the original code)."""
+    decode_latents: bool = False
+    """World-model variants: give the Q-network each latent (the current `z` and the predicted
+    ones) decoded by the VAE into observation units, 23 values each, instead of the 16-d code
+    (the paper's input). The same information, in the observation's geometry."""
     solved_success_rate: float = 0.9
     """`episodes_to_solve` is the first episode where the rolling success rate reaches this."""
     solved_window: int = 100
@@ -238,6 +242,7 @@ _PAPER_COMMON: dict[str, Any] = {
     "progress_reward": 0.0,
     "n_step": 1,
     "sort_humans": False,
+    "decode_latents": False,
 }
 _PAPER_ADAM: dict[str, Any] = {"optimizer": "adam", "amsgrad": False, "weight_decay": 0.0}
 # torch.optim.AdamW's default weight decay, which the paper's code left in place.

@@ -83,6 +83,16 @@ def test_paper_sizes_with_the_paper_world_model() -> None:
         "2stepahead-maspm": 80,
     }
     assert make_variant("2stepahead-maspm", vae, lstm, hidden_features=True).feature_dim == 1040
+    decoded = {
+        name: make_variant(name, vae, lstm, decode_latents=True).feature_dim for name in VARIANTS
+    }
+    assert decoded == {
+        "dueling-dqn": 23,
+        "wm-dueling-dqn": 23 + 256,
+        "2stepahead": 23 + 256,
+        "maspm": 23 * 5,
+        "2stepahead-maspm": 23 * 5,
+    }
 
 
 def test_dueling_dqn_features_are_the_observation() -> None:
@@ -207,6 +217,32 @@ def test_2stepahead_maspm_with_horizon_1_is_maspm() -> None:
         torch.testing.assert_close(
             one.step(obs[t + 1], actions[t]), maspm.step(obs[t + 1], actions[t])
         )
+
+
+@pytest.mark.parametrize(
+    ("name", "slots"),
+    [("wm-dueling-dqn", 1), ("2stepahead", 1), ("maspm", 5), ("2stepahead-maspm", 5)],
+)
+def test_decode_latents_replaces_every_latent_by_its_decoding(name: str, slots: int) -> None:
+    # The first `slots` blocks of a variant's features are latents (z, then the predictions);
+    # decoded, each becomes the VAE's reconstruction in raw units, and the rest is unchanged.
+    plain, decoded = variant(name), variant(name, decode_latents=True)
+    assert decoded.feature_dim == plain.feature_dim + slots * (OBS_DIM - LATENT)
+    obs, actions = observations(2)
+    pairs = [(plain.reset(obs[0]), decoded.reset(obs[0]))]
+    for t in range(2):
+        pairs.append(
+            (plain.step(obs[t + 1], actions[t])[0], decoded.step(obs[t + 1], actions[t])[0])
+        )
+    for codes, shown in pairs:
+        blocks = codes[:, : LATENT * slots].reshape(NUM_ENVS, slots, LATENT)
+        with torch.no_grad():
+            expected = decoded.vae.destandardize(decoded.vae.decode(blocks)).flatten(1)
+        torch.testing.assert_close(shown[:, : OBS_DIM * slots], expected)
+        torch.testing.assert_close(shown[:, OBS_DIM * slots :], codes[:, LATENT * slots :])
+    # Decoding changes what the Q-network sees, never the world model's state.
+    torch.testing.assert_close(decoded.state.h, plain.state.h)
+    torch.testing.assert_close(decoded.state.c, plain.state.c)
 
 
 @pytest.mark.parametrize("name", list(VARIANTS))
