@@ -391,14 +391,23 @@ def test_train_agent_errors(world_model_files: tuple[Path, Path]) -> None:
 # --- agent files and evaluation -----------------------------------------------------------------
 
 
-def test_save_load_agent_and_evaluate(world_model_files: tuple[Path, Path], tmp_path: Path) -> None:
-    result = train_agent("maspm", TINY, TINY_ENV, *world_model_files, seed=2)
+@pytest.mark.parametrize("decode_latents", [False, True])
+def test_save_load_agent_and_evaluate(
+    world_model_files: tuple[Path, Path], tmp_path: Path, decode_latents: bool
+) -> None:
+    params = dataclasses.replace(TINY, decode_latents=decode_latents)
+    result = train_agent("maspm", params, TINY_ENV, *world_model_files, seed=2)
     path = tmp_path / "agents" / "maspm" / "seed-2.pt"
     save_agent(path, result, extra={"note": "test"})
     agent = load_agent(path, device="cpu")
     assert agent.variant_name == "maspm" and agent.params == result.params
     assert agent.extra["seed"] == 2 and agent.extra["note"] == "test"
     assert agent.variant.sort_humans is result.params.sort_humans is True
+    # The file brings back the input the Q-network was trained on: z and 4 predictions, each
+    # the code or, decoded, a 23-d observation.
+    assert agent.variant.decode_latents is decode_latents
+    slot = 23 if decode_latents else agent.variant.latent_dim
+    assert agent.q_network.input_dim == agent.variant.feature_dim == 5 * slot
     assert_same_weights(agent.q_network, result.q_network)
     assert_same_weights(agent.variant.lstm, result.lstm)
     ids = np.arange(7, 19)
