@@ -88,7 +88,12 @@ class DuelingQNetwork(nn.Module):
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
         """Features (batch, input_dim) → Q-values (batch, num_actions)."""
-        return self.forward_cached(features)[0]
+        hidden = features
+        for layer in self._trunk:
+            hidden = F.leaky_relu(F.linear(hidden, layer.weight, layer.bias), LEAKY_SLOPE)
+        value = _stream_forward(self._value, hidden)[2]
+        advantage = _stream_forward(self._advantage, hidden)[2]
+        return dueling_q_values(value, advantage)
 
     # -- the DQN update's hand-written pass ----------------------------------------------------
     #
@@ -99,7 +104,10 @@ class DuelingQNetwork(nn.Module):
     # against autograd in the tests (tests/agents/test_dueling.py).
 
     def forward_cached(self, features: torch.Tensor) -> tuple[torch.Tensor, ForwardCache]:
-        """Q-values and what :meth:`backward_cached` needs (differentiable too, by autograd)."""
+        """Q-values and what :meth:`backward_cached` needs (differentiable too, by autograd).
+
+        :meth:`forward` computes the same Q-values, bit for bit, without keeping activations.
+        """
         inputs, pre_activations = [], []
         hidden = features
         for layer in self._trunk:
@@ -107,12 +115,8 @@ class DuelingQNetwork(nn.Module):
             pre = F.linear(hidden, layer.weight, layer.bias)
             pre_activations.append(pre)
             hidden = F.leaky_relu(pre, LEAKY_SLOPE)
-        value_pre = F.linear(hidden, self._value[0].weight, self._value[0].bias)
-        value_hidden = F.leaky_relu(value_pre, LEAKY_SLOPE)
-        advantage_pre = F.linear(hidden, self._advantage[0].weight, self._advantage[0].bias)
-        advantage_hidden = F.leaky_relu(advantage_pre, LEAKY_SLOPE)
-        value = F.linear(value_hidden, self._value[1].weight, self._value[1].bias)
-        advantage = F.linear(advantage_hidden, self._advantage[1].weight, self._advantage[1].bias)
+        value_pre, value_hidden, value = _stream_forward(self._value, hidden)
+        advantage_pre, advantage_hidden, advantage = _stream_forward(self._advantage, hidden)
         cache = ForwardCache(
             inputs, pre_activations, hidden, value_pre, value_hidden, advantage_pre,
             advantage_hidden,
@@ -160,6 +164,14 @@ class ForwardCache(NamedTuple):
     advantage_pre: torch.Tensor
     advantage_hidden: torch.Tensor
 
+    def head(self, rows: int) -> ForwardCache:
+        """The cache of the first ``rows`` examples of the batch (views, no copies)."""
+        return ForwardCache(
+            [x[:rows] for x in self.inputs],
+            [x[:rows] for x in self.pre_activations],
+            *(x[:rows] for x in self[2:]),
+        )
+
 
 def _leaky_relu_backward(grad: torch.Tensor, pre_activation: torch.Tensor) -> torch.Tensor:
     return torch.ops.aten.leaky_relu_backward(grad, pre_activation, LEAKY_SLOPE, False)
@@ -169,6 +181,15 @@ def _linear_weight_grads(layer: nn.Linear, grad_out: torch.Tensor, inputs: torch
     """``y = x Wᵀ + b``: dW = dyᵀ x, db = Σ_batch dy, written into the existing ``.grad``."""
     torch.mm(grad_out.t(), inputs, out=layer.weight.grad)
     torch.sum(grad_out, dim=0, out=layer.bias.grad)
+
+
+def _stream_forward(
+    layers: list[nn.Linear], stream_input: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Forward through ``Linear → LeakyReLU → Linear``: (pre-activation, hidden, output)."""
+    hidden_pre = F.linear(stream_input, layers[0].weight, layers[0].bias)
+    hidden = F.leaky_relu(hidden_pre, LEAKY_SLOPE)
+    return hidden_pre, hidden, F.linear(hidden, layers[1].weight, layers[1].bias)
 
 
 def _stream_backward(

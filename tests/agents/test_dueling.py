@@ -78,3 +78,25 @@ def test_hand_written_backward_equals_autograd(
     net.backward_cached(cache, grad_q)
     for name, param in net.named_parameters():
         torch.testing.assert_close(param.grad, expected[name], rtol=1e-5, atol=1e-6, msg=name)
+
+
+def test_forward_without_cache_and_the_head_of_a_cache() -> None:
+    """forward() is forward_cached() without the activations, and the first rows of a cache
+    are the cache of the first rows (the DQN update runs s and s′ in one pass)."""
+    torch.manual_seed(4)
+    net = DuelingQNetwork(9, trunk_sizes=(16, 8), stream_size=6)
+    features = torch.randn(10, 9)
+    with torch.no_grad():
+        q_values, cache = net.forward_cached(features)
+        head_q, head_cache = net.forward_cached(features[:4])
+    assert torch.equal(net(features), q_values)
+    torch.testing.assert_close(q_values[:4], head_q)
+    grad_q = torch.randn(4, 4)
+    grads = []
+    for used in (cache.head(4), head_cache):
+        for param in net.parameters():
+            param.grad = torch.empty_like(param)
+        net.backward_cached(used, grad_q)
+        grads.append([param.grad.clone() for param in net.parameters()])
+    for mine, expected in zip(*grads, strict=True):
+        torch.testing.assert_close(mine, expected)
