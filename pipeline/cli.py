@@ -651,52 +651,57 @@ def bench_train_command(
     variant: Annotated[
         list[str] | None, typer.Option(help="Variants (repeatable; default: all five).")
     ] = None,
-    num_envs: Annotated[int, typer.Option(min=1, help="Environments stepped together.")] = 64,
-    batch_size: Annotated[int, typer.Option(min=1, help="Transitions per update.")] = 64,
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
     seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per rate (s).")] = 3.0,
-    device: Annotated[str, typer.Option(help="cpu, cuda or auto.")] = "cpu",
-    hidden_features: Annotated[
-        bool, typer.Option(help="2stepahead-maspm on hidden states (the original code).")
-    ] = False,
-    horizon: Annotated[int, typer.Option(min=1, help="Imagined steps of the k-step variants.")] = 2,
-    decode_latents: Annotated[
-        bool, typer.Option(help="Latents decoded into observations (agent.decode_latents).")
-    ] = False,
+    device: DeviceOption = None,
 ) -> None:
     """Env-steps/s (act + simulate + world-model features + store) and gradient updates/s of
-    the DQN learner, per variant, with a random world model of the paper's sizes."""
+    the DQN learner, per variant, with the `agent` and `env` sections of the params file (e.g.
+    `--set agent.num_envs=64`) and a random world model of the `vae`/`lstm` sections' sizes."""
     from pipeline.agents.dqn import bench_train
     from pipeline.agents.params import VARIANT_NAMES, check_variant
+    from pipeline.config import load_params
+    from pipeline.worldmodel.training import resolve_device
 
-    _check_device(device)
     names = [check_variant(v) for v in variant or VARIANT_NAMES]
+    params = _with_device(load_params(params_path, overrides or []), "agent", device)
+    agent = params.agent
     import torch
 
     rows = []
     for name in names:
         r = bench_train(
             name,
-            num_envs=num_envs,
-            batch_size=batch_size,
+            params=agent,
+            env_params=params.env,
             seconds=seconds,
-            device=device,
-            hidden_features=hidden_features,
-            horizon=horizon,
-            decode_latents=decode_latents,
+            latent_dim=params.vae.latent_dim,
+            vae_hidden_dim=params.vae.hidden_dim,
+            lstm_hidden_dim=params.lstm.hidden_dim,
         )
         rows.append(
             {
                 "variant": name,
                 "features": r["feature_dim"],
+                "envs": r["num_envs"],
+                "batch": r["batch_size"],
                 "env_steps_per_s": r["env_steps_per_s"],
                 "updates_per_s": r["updates_per_s"],
             }
         )
     _print_table(
         rows,
-        f"socnav-wm bench train ({device}, {torch.get_num_threads()} torch threads, "
-        f"{num_envs} envs, batch {batch_size}, {seconds:g} s per rate)",
-        {"features": "d", "env_steps_per_s": ",.0f", "updates_per_s": ",.0f"},
+        f"socnav-wm bench train ({params_path}, {resolve_device(agent.device)}, "
+        f"{torch.get_num_threads()} torch threads, decode_latents {agent.decode_latents}, "
+        f"{seconds:g} s per rate)",
+        {
+            "features": "d",
+            "envs": "d",
+            "batch": "d",
+            "env_steps_per_s": ",.0f",
+            "updates_per_s": ",.0f",
+        },
     )
 
 

@@ -56,3 +56,33 @@ def test_bench_collect_prints_a_table() -> None:
     result = runner.invoke(app, ["bench", "collect", "--episodes", "16", "--num-envs", "8"])
     assert result.exit_code == 0, result.output
     assert "steps_per_s" in result.output and "parquet_mb" in result.output
+
+
+def test_bench_train_reads_the_params_file_and_overrides(tmp_path: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text("agent:\n  num_envs: 4\n  batch_size: 8\n  decode_latents: true\n")
+    result = runner.invoke(
+        app,
+        [
+            "bench", "train", "--variant", "maspm", "--params", str(params),
+            "--set", "agent.batch_size=16", "--seconds", "0.1", "--device", "cpu",
+        ],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "decode_latents True" in result.output
+    row = next(line for line in result.output.splitlines() if "maspm" in line)
+    cells = [cell.strip() for cell in row.split("│")[1:-1]]
+    # maspm with decoded latents: z and four predictions, 23 values each; 4 envs, batch 16.
+    assert cells[:4] == ["maspm", "115", "4", "16"]
+
+
+def test_bench_train_rejects_a_bad_override_in_one_line(tmp_path: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text("")
+    result = runner.invoke(
+        app, ["bench", "train", "--params", str(params), "--set", "agent.batch_size=0"]
+    )
+    assert result.exit_code == 2
+    assert result.output.strip() == (
+        "error: --set agent.batch_size=0: agent.batch_size: must be > 0, got 0"
+    )

@@ -951,43 +951,40 @@ def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> d
 def bench_train(
     variant: str,
     *,
-    num_envs: int = 64,
-    batch_size: int = 64,
-    seconds: float = 3.0,
-    device: str = "cpu",
     params: AgentParams | None = None,
     env_params: EnvParams | None = None,
-    hidden_features: bool = False,
-    horizon: int = 2,
-    decode_latents: bool = False,
+    seconds: float = 3.0,
+    latent_dim: int = 16,
+    vae_hidden_dim: int = 256,
+    lstm_hidden_dim: int = 256,
 ) -> dict[str, Any]:
     """Env-steps/s (acting + simulator + features + storing) and gradient updates/s, measured
-    separately, with a random-initialised world model of the paper's sizes.
+    separately, with a random-initialised world model of the given sizes (the paper's by
+    default).
 
-    Returns ``{"variant", "feature_dim", "num_envs", "batch_size", "env_steps_per_s",
-    "updates_per_s"}``. Each rate is measured for ``seconds`` after a short warm-up.
+    ``params`` is the ``agent`` section the training would use (the variant's preset is applied
+    here); ``num_envs`` environments are stepped together and each update reads ``batch_size``
+    transitions. Returns ``{"variant", "feature_dim", "num_envs", "batch_size",
+    "env_steps_per_s", "updates_per_s"}``. Each rate is measured for ``seconds`` after a short
+    warm-up.
     """
     check_variant(variant)
     env_params = env_params or EnvParams()
-    p = params or AgentParams()
+    p = (params or AgentParams()).resolved(variant)
+    num_envs, batch_size = p.num_envs, p.batch_size
     p = dataclasses.replace(
         p,
-        num_envs=num_envs,
-        batch_size=batch_size,
         learning_starts=batch_size,  # the benchmark calls the update itself
         buffer_size=max(p.buffer_size, num_envs, batch_size),
-        horizon=horizon,
-        maspm_hidden_features=hidden_features,
-        decode_latents=decode_latents,
-        device=device,
     )
+    device = p.device
     target = resolve_device(device)
     torch.manual_seed(0)
     sim = Simulator(num_envs, env_params)
     vae = lstm = None
     if VARIANTS[variant].needs_world_model:
-        vae = VAE(sim.obs_dim, 256, 16)
-        lstm = LatentLSTM(16, NUM_ACTIONS, 256)
+        vae = VAE(sim.obs_dim, vae_hidden_dim, latent_dim)
+        lstm = LatentLSTM(latent_dim, NUM_ACTIONS, lstm_hidden_dim)
     features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=target)
     learner = DQNLearner(features_of.feature_dim, p, target)
     replay = ReplayBuffer(p.buffer_size, features_of.feature_dim, target, seed=0)
