@@ -437,7 +437,7 @@ def test_load_agent_errors(tmp_path: Path) -> None:
 
 
 def test_bench_train_reports_both_rates() -> None:
-    params = AgentParams(num_envs=8, batch_size=16, buffer_size=64)
+    params = AgentParams(num_envs=8, batch_size=16)
     row = bench_train("2stepahead-maspm", params=params, seconds=0.05)
     assert (row["feature_dim"], row["num_envs"], row["batch_size"]) == (80, 8, 16)
     assert row["env_steps_per_s"] > 0 and row["updates_per_s"] > 0
