@@ -69,7 +69,7 @@ def test_bench_train_reads_the_params_file_and_overrides(tmp_path: Path) -> None
         ],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
-    assert "decode_latents True" in result.output
+    assert "preset shared, decode_latents True" in " ".join(result.output.split())  # title
     row = next(line for line in result.output.splitlines() if "maspm" in line)
     cells = [cell.strip() for cell in row.split("│")[1:-1]]
     # maspm with decoded latents: z and four predictions, 23 values each; 4 envs, batch 16.
