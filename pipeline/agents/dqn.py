@@ -978,8 +978,7 @@ def bench_train(
         learning_starts=batch_size,  # the benchmark calls the update itself
         buffer_size=max(p.buffer_size, num_envs, batch_size),
     )
-    device = p.device
-    target = resolve_device(device)
+    target = resolve_device(p.device)
     torch.manual_seed(0)
     sim = Simulator(num_envs, env_params)
     vae = lstm = None
