@@ -424,19 +424,30 @@ def train_agent_command(
         )
         summary = training_metrics(result, greedy)
         out = out_dir / variant / f"seed-{seed}.pt"
-        save_agent(out, result, extra={"metrics": summary})
+        save_agent(out, result, extra={"metrics": summary, "selection": result.selection})
         save_resolved(params, _config_path(out))
         write_training_log(result.episodes, log_dir / variant / f"seed-{seed}.parquet")
         write_json_atomic(metrics_dir / variant / f"seed-{seed}.json", summary)
         run.log_metrics({k: float(v) for k, v in summary.items() if v is not None})
+        for selection_run in result.selection:
+            run.log_metrics(
+                {"selection_success_rate": selection_run["success_rate"]},
+                step=selection_run["episode"],
+            )
         run.log_artifact(out)
         run.log_artifact(_config_path(out))
         if not keep_checkpoint:
             checkpoint.unlink(missing_ok=True)
     solved = summary["episodes_to_solve"]
+    selected = ""
+    if result.selected_episode is not None:
+        selected = (
+            f" (weights of episode {result.selected_episode}, best of {len(result.selection)} "
+            "greedy runs on the selection scenarios)"
+        )
     typer.echo(
         f"wrote {out}: greedy success {summary['greedy_success_rate']:.1%} on "
-        f"{len(greedy)} validation scenarios; solved at episode {solved or 'never'}; "
+        f"{len(greedy)} validation scenarios{selected}; solved at episode {solved or 'never'}; "
         f"{result.env_steps:,} env steps, {result.updates:,} updates in "
         f"{result.wall_time / 60:.1f} min"
     )

@@ -44,6 +44,8 @@ TINY = {
         "stream_size": 16,
         "checkpoint_every": 10,
         "eval_episodes": 8,
+        "select_every": 10,
+        "select_episodes": 4,
         "solved_window": 10,
         "solved_success_rate": 0.9,
         "device": "cpu",
@@ -175,6 +177,7 @@ def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
                 (workdir / f"metrics/agents/{variant}/seed-{seed}.json").read_text()
             )
             assert summary["episodes"] == 30 and summary["greedy_episodes"] == 8
+            assert 10 <= summary["selected_episode"] <= 30  # one of the greedy runs' weights
             assert summary["final_success_rate"] == pytest.approx(
                 float(np.mean(log["success"].to_numpy()[-10:]))  # agent.solved_window
             )
@@ -212,6 +215,8 @@ def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
     run = agents[0]
     assert client.get_metric_history(run.info.run_id, "success_rate")
     assert "greedy_success_rate" in run.data.metrics
+    selection = client.get_metric_history(run.info.run_id, "selection_success_rate")
+    assert len(selection) == 3 and max(m.step for m in selection) == 30  # episodes 10, 20, 30
     evaluations = {r.data.tags["method"]: r for r in _runs("evaluate/")}
     assert set(evaluations) == {"dueling-dqn", "2stepahead-maspm", "orca", "sfm"}
     assert "success" in evaluations["orca"].data.metrics

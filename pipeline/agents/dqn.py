@@ -19,6 +19,12 @@ Decisions that differ from the paper's code (paper_spec §5, §8), each document
 * **One shared hyper-parameter set** for all variants, so that they are compared fairly; the
   ``paper`` preset restores the per-variant table of paper_spec §5
   (:data:`pipeline.agents.params.PAPER_PRESET`).
+* **Model selection** (``select_every`` > 0; off in the library's defaults, on in
+  ``params.yaml``): every ``select_every`` episodes and at the end, the current network runs
+  greedily on held-out selection scenarios, and the agent keeps the weights that succeeded most
+  often. The paper keeps the last weights, which with ε-greedy DQN are one draw from a
+  fluctuating sequence. The greedy check after training and the test evaluation use other
+  scenarios, so their numbers are not biased by the choice.
 * Many environments are stepped together; ε still decays once per *finished episode*, as in the
   paper, so the schedule is in episodes whatever ``num_envs`` is.
 """
@@ -56,8 +62,9 @@ from pipeline.worldmodel.vae import VAE
 AGENT_FORMAT = "socnav-wm-agent"
 CHECKPOINT_FORMAT = "socnav-wm-agent-checkpoint"
 AGENT_FORMAT_VERSION = 1
-CHECKPOINT_FORMAT_VERSION = 2
-"""2: the optimiser steps one flat buffer of weights (version 1 had one tensor per layer)."""
+CHECKPOINT_FORMAT_VERSION = 3
+"""2: the optimiser steps one flat buffer of weights (version 1 had one tensor per layer).
+3: the model selection's greedy runs and best weights (``agent.select_every``)."""
 
 
 def goal_distances(obs: np.ndarray) -> np.ndarray:
@@ -241,6 +248,14 @@ class DQNLearner:
         self._target_weights.lerp_(self._weights, 1.0 - p.polyak)
         return loss
 
+    def weights(self) -> torch.Tensor:
+        """A copy of the online network's weights, as one flat tensor."""
+        return self._weights.detach().clone()
+
+    def load_weights(self, flat: torch.Tensor) -> None:
+        """Give the online network the weights of :meth:`weights` (target and optimiser stay)."""
+        self._weights.copy_(flat)
+
     def state_dict(self) -> dict[str, Any]:
         return {
             "q_network": self.q_network.state_dict(),
@@ -298,6 +313,10 @@ class TrainResult:
         env_steps, updates: totals over the run.
         wall_time: seconds of training (over all sessions of a resumed run).
         vae, lstm: the frozen world model (None for ``dueling-dqn``), saved with the agent.
+        selection: with ``select_every`` > 0, one ``{"episode", "success_rate"}`` per greedy run
+            on the selection scenarios; empty otherwise.
+        selected_episode: the episode after which ``q_network``'s weights were taken (the best
+            greedy run, ties to the later); None without selection (the final weights).
     """
 
     q_network: DuelingQNetwork
@@ -312,7 +331,8 @@ class TrainResult:
     wall_time: float
     vae: VAE | None = None
     lstm: LatentLSTM | None = None
-    metrics: dict[str, Any] = field(default_factory=dict)
+    selection: list[dict[str, Any]] = field(default_factory=list)
+    selected_episode: int | None = None
 
 
 def variant_for(
@@ -522,6 +542,9 @@ def train_agent(
     rows: list[dict[str, Any]] = []
     env_steps = updates = 0
     elapsed_before = 0.0  # wall time of earlier sessions of a resumed run
+    # Model selection (select_every > 0): greedy runs on held-out scenarios, the best weights.
+    selection: list[dict[str, Any]] = []
+    best_weights: torch.Tensor | None = None
 
     def save_checkpoint() -> None:
         payload = {
@@ -545,6 +568,7 @@ def train_agent(
                 "wall_time": elapsed_before + time.perf_counter() - start,
             },
             "rows": rows,
+            "selection": {"runs": selection, "best_weights": best_weights},
         }
         with atomic_path(checkpoint_path) as tmp:
             torch.save(payload, tmp)
@@ -567,9 +591,26 @@ def train_agent(
         env_steps, updates = int(counters["env_steps"]), int(counters["updates"])
         elapsed_before = float(counters["wall_time"])
         rows = list(saved["rows"])
+        selection = list(saved["selection"]["runs"])
+        best_weights = saved["selection"]["best_weights"]
+        if best_weights is not None:
+            best_weights = best_weights.to(device)
+
+    def select() -> None:
+        """Run the current network greedily on the selection scenarios; keep it if best."""
+        nonlocal best_weights
+        greedy = Agent(learner.q_network, features_of, p, env_params)  # acts on its own copies
+        runs = evaluate_agent(
+            greedy, env_params, seed=selection_seed(seed), scenario_ids=np.arange(p.select_episodes)
+        )
+        rate = float(np.mean([run["success"] for run in runs]))
+        if not selection or rate >= max(run["success_rate"] for run in selection):
+            best_weights = learner.weights()
+        selection.append({"episode": len(rows), "success_rate": rate})
 
     start = time.perf_counter()
     next_checkpoint = (len(rows) // p.checkpoint_every + 1) * p.checkpoint_every
+    next_selection = (len(rows) // p.select_every + 1) * p.select_every if p.select_every else 0
     solved_at: int | None = None
     with progress(p.episodes, f"train-agent {variant}", quiet=quiet, unit="episodes") as bar:
         bar.advance(min(len(rows), p.episodes))
@@ -642,6 +683,10 @@ def train_agent(
                     on_episodes(finished)
                 recent = [row["success"] for row in rows[-p.solved_window :]]
                 bar.set_postfix(success=float(np.mean(recent)), epsilon=epsilon)
+                # Before the checkpoint, so that a checkpoint holds every run up to its episode.
+                if p.select_every and (len(rows) >= next_selection or len(rows) >= p.episodes):
+                    select()
+                    next_selection = (len(rows) // p.select_every + 1) * p.select_every
                 if checkpoint_path is not None and len(rows) >= next_checkpoint:
                     if len(rows) < p.episodes:
                         save_checkpoint()
@@ -650,6 +695,11 @@ def train_agent(
     wall_time = elapsed_before + time.perf_counter() - start
     if checkpoint_path is not None:
         save_checkpoint()  # the finished run: resuming it just returns this result
+    selected_episode = None
+    if best_weights is not None:
+        learner.load_weights(best_weights)
+        best = max(run["success_rate"] for run in selection)
+        selected_episode = max(run["episode"] for run in selection if run["success_rate"] == best)
     solved_at = episodes_to_solve(
         [row["success"] for row in rows], p.solved_window, p.solved_success_rate
     )
@@ -667,6 +717,8 @@ def train_agent(
         wall_time=wall_time,
         vae=vae,
         lstm=lstm,
+        selection=selection,
+        selected_episode=selected_episode,
     )
 
 
@@ -925,8 +977,16 @@ def validation_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 0x7A11D]).generate_state(1)[0])
 
 
+def selection_seed(seed: int) -> int:
+    """Simulator seed of the model selection of training run ``seed`` (``select_every``): its
+    own scenarios, so that the greedy check on :func:`validation_seed`'s scenarios and the test
+    evaluation stay unbiased by the choice."""
+    return int(np.random.SeedSequence([seed, 0x5E1EC7]).generate_state(1)[0])
+
+
 def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Summary of a training run: totals, the last episodes' rates and the greedy check."""
+    """Summary of a training run: totals, the last episodes' rates, the model selection (None
+    without it; its best rate is biased upwards by the choice) and the greedy check."""
     last = result.episodes[-result.params.solved_window :]
     return {
         "episodes": len(result.episodes),
@@ -937,6 +997,10 @@ def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> d
         "env_steps_per_s": result.env_steps / max(result.wall_time, 1e-9),
         "final_success_rate": float(np.mean([row["success"] for row in last])),
         "final_return": float(np.mean([row["return"] for row in last])),
+        "selected_episode": result.selected_episode,
+        "selected_success_rate": max(
+            (run["success_rate"] for run in result.selection), default=None
+        ),
         "greedy_episodes": len(greedy),
         "greedy_success_rate": float(np.mean([row["success"] for row in greedy])),
         "greedy_collision_rate": float(np.mean([row["collision"] != "none" for row in greedy])),

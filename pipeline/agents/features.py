@@ -386,6 +386,10 @@ class _MultiActionFeatures(Variant):
             h = flat_state[0].reshape(batch, NUM_ACTIONS, -1)
         return predicted, h, real
 
+    def _shown_with_current(self, z: torch.Tensor, predicted: torch.Tensor) -> torch.Tensor:
+        """``z | ẑ_0 | … | ẑ_3`` (B, (1 + A)·shown_dim), shown in one call of the decoder."""
+        return self.shown(torch.cat([z.unsqueeze(1), predicted], dim=1)).flatten(1)
+
 
 class MultiActionFeatures(_MultiActionFeatures):
     """``maspm``: ``z | ẑ_0 | … | ẑ_3`` with ``ẑ_i = L(z, i, H)``, all from the same ``H``."""
@@ -397,7 +401,7 @@ class MultiActionFeatures(_MultiActionFeatures):
 
     def compute(self, z, actions, state):
         predicted, _, real = self._rollouts(z, actions, state, steps=1)
-        return torch.cat([self.shown(z), self.shown(predicted).flatten(1)], dim=1), real
+        return self._shown_with_current(z, predicted), real
 
 
 class StepAheadMultiActionFeatures(_MultiActionFeatures):
@@ -415,8 +419,9 @@ class StepAheadMultiActionFeatures(_MultiActionFeatures):
 
     def compute(self, z, actions, state):
         predicted, hidden, real = self._rollouts(z, actions, state, steps=self.horizon)
-        rollout = hidden if self.hidden_features else self.shown(predicted)
-        return torch.cat([self.shown(z), rollout.flatten(1)], dim=1), real
+        if self.hidden_features:
+            return torch.cat([self.shown(z), hidden.flatten(1)], dim=1), real
+        return self._shown_with_current(z, predicted), real
 
 
 VARIANTS: dict[str, type[Variant]] = {

@@ -134,7 +134,15 @@ class AgentParams:
     checkpoint_every: int = 1000
     """Write a resumable checkpoint every this many finished episodes."""
     eval_episodes: int = 500
-    """Fresh test scenarios of the greedy evaluation."""
+    """Scenarios of the greedy check at the end of training (validation scenarios, neither
+    training nor test ones)."""
+    select_every: int = 0
+    """Every this many episodes, and at the end, run the current network greedily on
+    `select_episodes` selection scenarios (their own seed: neither training, validation nor test
+    ones) and keep the weights that succeed most often (ties: the later). 0: keep the final
+    weights (the paper's way)."""
+    select_episodes: int = 500
+    """Selection scenarios of each of those greedy runs."""
     device: DeviceName = "auto"
     """`auto` uses CUDA when available, else the CPU."""
 
@@ -164,12 +172,12 @@ class AgentParams:
         positive = (
             "episodes", "num_envs", "learning_rate", "batch_size", "buffer_size", "n_step",
             "updates_per_step", "epsilon_decay", "stream_size", "horizon", "solved_success_rate",
-            "solved_window", "checkpoint_every", "eval_episodes",
+            "solved_window", "checkpoint_every", "eval_episodes", "select_episodes",
         )  # fmt: skip
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"agent.{name}: must be > 0, got {getattr(self, name)!r}")
-        for name in ("weight_decay", "grad_clip", "progress_reward"):
+        for name in ("weight_decay", "grad_clip", "progress_reward", "select_every"):
             if getattr(self, name) < 0:
                 raise ValueError(f"agent.{name}: must be >= 0, got {getattr(self, name)!r}")
         unit = ("gamma", "epsilon_decay", "solved_success_rate", "epsilon_start", "epsilon_min")

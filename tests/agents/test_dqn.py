@@ -22,6 +22,7 @@ from pipeline.agents.dqn import (
     evaluate_agent,
     load_agent,
     save_agent,
+    selection_seed,
     train_agent,
 )
 from pipeline.agents.replay import Batch
@@ -216,6 +217,8 @@ def test_paper_preset_reproduces_the_per_variant_table() -> None:
         ({"trunk_sizes": (64, 0)}, "agent.trunk_sizes: expected a non-empty list of positive"),
         ({"horizon": 0}, "agent.horizon: must be > 0, got 0"),
         ({"progress_reward": -1.0}, "agent.progress_reward: must be >= 0, got -1.0"),
+        ({"select_every": -1}, "agent.select_every: must be >= 0, got -1"),
+        ({"select_episodes": 0}, "agent.select_episodes: must be > 0, got 0"),
     ],
 )
 def test_bad_params_give_one_line_errors(values: dict, message: str) -> None:
@@ -294,16 +297,49 @@ def test_same_seed_same_weights(variant: str, world_model_files: tuple[Path, Pat
     assert not torch.equal(runs[0].q_network.trunk[0].weight, runs[2].q_network.trunk[0].weight)
 
 
+def test_model_selection_keeps_the_best_greedy_weights() -> None:
+    final = train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0)
+    params = dataclasses.replace(TINY, select_every=10, select_episodes=20)
+    result = train_agent("dueling-dqn", params, TINY_ENV, None, None, seed=0)
+    # The greedy runs use their own simulator and generators: the training is the same.
+    assert without_time(result.episodes) == without_time(final.episodes)
+    episodes = [run["episode"] for run in result.selection]
+    assert episodes[-1] == TINY.episodes
+    for k, episode in enumerate(episodes[:-1], start=1):  # episodes end num_envs at a time
+        assert 10 * k <= episode < 10 * k + TINY.num_envs
+    rates = [run["success_rate"] for run in result.selection]
+    best = max(rates)
+    assert result.selected_episode == max(
+        run["episode"] for run in result.selection if run["success_rate"] == best
+    )  # ties go to the later weights
+    # This seed's best run is not the last one, so the kept weights are not the final ones.
+    assert result.selected_episode < TINY.episodes
+    assert not torch.equal(result.q_network.trunk[0].weight, final.q_network.trunk[0].weight)
+    # The kept weights are those that scored best: running them again gives that rate.
+    rows = evaluate_agent(
+        agent_from_result(result), TINY_ENV, seed=selection_seed(0), scenario_ids=np.arange(20)
+    )
+    assert np.mean([row["success"] for row in rows]) == best
+    assert final.selection == [] and final.selected_episode is None
+
+
 class Interrupted(Exception):
     pass
 
 
-@pytest.mark.parametrize(("variant", "n_step"), [("dueling-dqn", 1), ("2stepahead", 3)])
+@pytest.mark.parametrize(
+    ("variant", "n_step", "select_every"),
+    [("dueling-dqn", 1, 0), ("2stepahead", 3, 0), ("dueling-dqn", 1, 10)],
+)
 def test_resumed_run_ends_with_the_same_weights(
-    variant: str, n_step: int, world_model_files: tuple[Path, Path], tmp_path: Path
+    variant: str,
+    n_step: int,
+    select_every: int,
+    world_model_files: tuple[Path, Path],
+    tmp_path: Path,
 ) -> None:
     files = world_model_files
-    params = dataclasses.replace(TINY, n_step=n_step)
+    params = dataclasses.replace(TINY, n_step=n_step, select_every=select_every, select_episodes=20)
     uninterrupted = train_agent(variant, params, TINY_ENV, *files, seed=5)
 
     def interrupt(rows: list[dict]) -> None:
@@ -322,6 +358,8 @@ def test_resumed_run_ends_with_the_same_weights(
     assert_same_weights(uninterrupted.q_network, resumed.q_network)
     assert without_time(resumed.episodes) == without_time(uninterrupted.episodes)
     assert (resumed.env_steps, resumed.updates) == (uninterrupted.env_steps, uninterrupted.updates)
+    assert resumed.selection == uninterrupted.selection
+    assert resumed.selected_episode == uninterrupted.selected_episode
     assert [p.name for p in tmp_path.iterdir()] == ["run.ckpt"]  # no temporary files left
     # Resuming a finished run just gives its result back.
     again = train_agent(
