@@ -292,4 +292,4 @@ paper's reward alone: no progress reward). Run scale
 (``bootstrap_truncation``, ``carry_imagined``, ``maspm_hidden_features``) are not part of the
 preset: the paper's exact setting is additionally ``num_envs: 1``, ``updates_per_step: 1``,
 ``episodes: 200000``, ``bootstrap_truncation: false``, ``carry_imagined: true``,
-``maspm_hidden_features: true``."""
+``maspm_hidden_features: true``, and ``select_every: 0`` (the final weights)."""
