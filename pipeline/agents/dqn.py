@@ -603,10 +603,11 @@ def train_agent(
         runs = evaluate_agent(
             greedy, env_params, seed=selection_seed(seed), scenario_ids=np.arange(p.select_episodes)
         )
-        rate = float(np.mean([run["success"] for run in runs]))
-        if not selection or rate >= max(run["success_rate"] for run in selection):
+        selection.append(
+            {"episode": len(rows), "success_rate": float(np.mean([r["success"] for r in runs]))}
+        )
+        if best_selection_run(selection) is selection[-1]:
             best_weights = learner.weights()
-        selection.append({"episode": len(rows), "success_rate": rate})
 
     start = time.perf_counter()
     next_checkpoint = (len(rows) // p.checkpoint_every + 1) * p.checkpoint_every
@@ -695,11 +696,9 @@ def train_agent(
     wall_time = elapsed_before + time.perf_counter() - start
     if checkpoint_path is not None:
         save_checkpoint()  # the finished run: resuming it just returns this result
-    selected_episode = None
-    if best_weights is not None:
+    selected = best_selection_run(selection)
+    if best_weights is not None:  # the weights of `selected`
         learner.load_weights(best_weights)
-        best = max(run["success_rate"] for run in selection)
-        selected_episode = max(run["episode"] for run in selection if run["success_rate"] == best)
     solved_at = episodes_to_solve(
         [row["success"] for row in rows], p.solved_window, p.solved_success_rate
     )
@@ -718,7 +717,7 @@ def train_agent(
         vae=vae,
         lstm=lstm,
         selection=selection,
-        selected_episode=selected_episode,
+        selected_episode=selected["episode"] if selected is not None else None,
     )
 
 
@@ -984,10 +983,17 @@ def selection_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 0x5E1EC7]).generate_state(1)[0])
 
 
+def best_selection_run(selection: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """The model selection's greedy run whose weights are kept: the highest success rate, the
+    later run on ties; None before any run."""
+    return max(reversed(selection), key=lambda run: run["success_rate"], default=None)
+
+
 def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Summary of a training run: totals, the last episodes' rates, the model selection (None
     without it; its best rate is biased upwards by the choice) and the greedy check."""
     last = result.episodes[-result.params.solved_window :]
+    selected = best_selection_run(result.selection)
     return {
         "episodes": len(result.episodes),
         "episodes_to_solve": result.episodes_to_solve,
@@ -998,9 +1004,7 @@ def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> d
         "final_success_rate": float(np.mean([row["success"] for row in last])),
         "final_return": float(np.mean([row["return"] for row in last])),
         "selected_episode": result.selected_episode,
-        "selected_success_rate": max(
-            (run["success_rate"] for run in result.selection), default=None
-        ),
+        "selected_success_rate": selected["success_rate"] if selected is not None else None,
         "greedy_episodes": len(greedy),
         "greedy_success_rate": float(np.mean([row["success"] for row in greedy])),
         "greedy_collision_rate": float(np.mean([row["collision"] != "none" for row in greedy])),
