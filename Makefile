@@ -9,7 +9,13 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TORCH ?= torch==2.13.0
 
-.PHONY: setup run test lint bench clean
+# `make run`'s parallel agent trainings: JOBS `dvc repro` processes at once, THREADS torch threads
+# each (by default one job per core, one thread per job).
+CORES := $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
+JOBS ?= $(CORES)
+THREADS ?= $(shell j=$(JOBS); t=$$(( $(CORES) / (j > 0 ? j : 1) )); echo $$(( t > 0 ? t : 1 )))
+
+.PHONY: setup run repro test lint bench clean
 
 setup: $(STAMP)
 
@@ -22,7 +28,20 @@ $(STAMP): pyproject.toml
 
 # dvc runs each stage's `socnav-wm …` command, so the venv's bin goes first on PATH.
 run: $(STAMP)
-	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(MAKE) repro
+
+# `dvc repro` with the agent trainings in parallel (with whatever `dvc` is on PATH). DVC runs one
+# stage at a time, and the trainings (independent stages, minutes each on one core) are most of
+# the pipeline's time, so they run first as JOBS `dvc repro --single-item` processes: DVC
+# releases its repository lock while a stage's command runs, and --wait-for-lock queues the
+# jobs' short bookkeeping (hashing, dvc.lock). The final `dvc repro` runs the rest (evaluations,
+# report) and finds the trainings up to date. A training's numbers do not depend on its thread
+# count. JOBS=1 gives the plain sequential `dvc repro`.
+repro:
+	dvc repro train_lstm
+	dvc stage list --name-only | grep '^train_agent@' \
+		| OMP_NUM_THREADS=$(THREADS) xargs -n 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
+	dvc repro
 
 test: $(STAMP)
 	$(BIN)/ruff check .

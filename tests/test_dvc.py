@@ -43,17 +43,24 @@ def repo(tmp_path: Path) -> Path:
     return copy
 
 
-def _dvc(repo: Path, *args: str) -> str:
+def _run(repo: Path, *command: str) -> str:
+    """Run ``command`` in ``repo`` with this environment's ``dvc`` and ``socnav-wm`` on PATH."""
     env = dict(os.environ)
     bin_dir = str(Path(sys.executable).parent)
     env["PATH"] = bin_dir + os.pathsep + env.get("PATH", "")
-    env["MLFLOW_TRACKING_URI"] = f"sqlite:///{repo / 'mlflow.db'}"
+    env["MLFLOW_TRACKING_URI"] = _tracking_uri(repo)
     env["DVC_NO_ANALYTICS"] = "1"
-    result = subprocess.run(
-        [str(Path(bin_dir) / "dvc"), *args], cwd=repo, env=env, capture_output=True, text=True
-    )
+    result = subprocess.run(command, cwd=repo, env=env, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
     return result.stdout + result.stderr
+
+
+def _dvc(repo: Path, *args: str) -> str:
+    return _run(repo, str(Path(sys.executable).parent / "dvc"), *args)
+
+
+def _tracking_uri(repo: Path) -> str:
+    return f"sqlite:///{repo / 'mlflow.db'}"
 
 
 def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) -> None:
@@ -83,9 +90,28 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
     shown = _dvc(repo, "metrics", "show")
     assert "one_step_mse" in shown and "val_recon_mse" in shown
 
-    # The whole pipeline: agents × seeds, the evaluations, the report.
-    output = _dvc(repo, "repro")
-    assert "Running stage 'train_agent@2stepahead-maspm-1'" in output
+    # The whole pipeline as `make run` runs it: the agent trainings as two concurrent
+    # `dvc repro` jobs, then the evaluations and the report.
+    if shutil.which("make") is None:
+        pytest.fail("make is required for the DVC test")
+    output = _run(repo, "make", "repro", "JOBS=2")
+    runs = [(v, s) for v in ("dueling-dqn", "2stepahead-maspm") for s in (0, 1)]
+    trainings = [f"train_agent@{v}-{s}" for v, s in runs]
+    for stage in trainings:  # each ran once: the final `dvc repro` found it up to date
+        assert output.count(f"Running stage '{stage}'") == 1, stage
+    # The jobs' bookkeeping did not clobber one another: every training is in dvc.lock, and
+    # each has one finished MLflow run.
+    lock = yaml.safe_load((repo / "dvc.lock").read_text())
+    assert set(trainings) <= set(lock["stages"])
+    assert "Data and pipelines are up to date" in _dvc(repo, "status")
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=_tracking_uri(repo))
+    experiment = client.get_experiment_by_name("socnav-wm")
+    mlflow_runs = client.search_runs([experiment.experiment_id], "tags.stage LIKE 'train-agent/%'")
+    names = sorted(f"train-agent/{v}/seed-{s}" for v, s in runs)
+    assert sorted(run.info.run_name for run in mlflow_runs) == names
+    assert {run.info.status for run in mlflow_runs} == {"FINISHED"}
     assert "Running stage 'evaluate_baseline@sfm'" in output
     outputs = (
         "models/agents/dueling-dqn/seed-0.pt",
