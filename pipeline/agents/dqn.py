@@ -84,6 +84,11 @@ def training_env_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 0x50C1A1]).generate_state(1)[0])
 
 
+def _next_multiple(done: int, every: int) -> int:
+    """The first multiple of ``every`` above ``done`` (when the next periodic event is due)."""
+    return (done // every + 1) * every
+
+
 def episodes_to_solve(success: Sequence[bool] | np.ndarray, window: int, rate: float) -> int | None:
     """First episode (1-based) at which the mean success of the last ``window`` episodes
     reaches ``rate``; None if it never does. Needs ``window`` complete episodes.
@@ -610,8 +615,8 @@ def train_agent(
             best_weights = learner.weights()
 
     start = time.perf_counter()
-    next_checkpoint = (len(rows) // p.checkpoint_every + 1) * p.checkpoint_every
-    next_selection = (len(rows) // p.select_every + 1) * p.select_every if p.select_every else 0
+    next_checkpoint = _next_multiple(len(rows), p.checkpoint_every)
+    next_selection = _next_multiple(len(rows), p.select_every) if p.select_every else 0
     solved_at: int | None = None
     with progress(p.episodes, f"train-agent {variant}", quiet=quiet, unit="episodes") as bar:
         bar.advance(min(len(rows), p.episodes))
@@ -687,11 +692,11 @@ def train_agent(
                 # Before the checkpoint, so that a checkpoint holds every run up to its episode.
                 if p.select_every and (len(rows) >= next_selection or len(rows) >= p.episodes):
                     select()
-                    next_selection = (len(rows) // p.select_every + 1) * p.select_every
+                    next_selection = _next_multiple(len(rows), p.select_every)
                 if checkpoint_path is not None and len(rows) >= next_checkpoint:
                     if len(rows) < p.episodes:
                         save_checkpoint()
-                    next_checkpoint = (len(rows) // p.checkpoint_every + 1) * p.checkpoint_every
+                    next_checkpoint = _next_multiple(len(rows), p.checkpoint_every)
 
     wall_time = elapsed_before + time.perf_counter() - start
     if checkpoint_path is not None:
