@@ -94,13 +94,28 @@ DeviceOption = Annotated[
 
 @contextmanager
 def _stage(
-    name: str, params_path: Path, overrides: list[str] | None, no_tracking: bool, sections: tuple
+    name: str,
+    params_path: Path,
+    overrides: list[str] | None,
+    no_tracking: bool,
+    sections: tuple,
+    device: tuple[str, str | None] | None = None,
 ) -> Iterator[tuple[Any, Any]]:
-    """Load and validate the params, then open the stage's MLflow run (checked before work)."""
+    """Load and validate the params, then open the stage's MLflow run (checked before work).
+
+    ``device`` is ``(section, --device option)``: the option replaces that section's ``device``
+    before the params are logged, and the device is checked (CUDA asked for on a machine
+    without it is an error before any run opens).
+    """
     from pipeline.config import load_params, params_dict
     from pipeline.tracking import stage_run
+    from pipeline.worldmodel.training import resolve_device
 
     params = load_params(params_path, overrides or [])
+    if device is not None:
+        section, option = device
+        params = _with_device(params, section, option)
+        resolve_device(getattr(params, section).device)
     logged = {key: value for key, value in params_dict(params).items() if key in sections}
     with stage_run(name, logged, enabled=not no_tracking) as run:
         yield params, run
@@ -220,11 +235,12 @@ def train_vae_command(
     from pipeline.worldmodel.fit import fit_vae
     from pipeline.worldmodel.training import save_vae
 
-    with _stage("train-vae", params_path, overrides, no_tracking, ("seed", "vae")) as (
+    with _stage(
+        "train-vae", params_path, overrides, no_tracking, ("seed", "vae"), ("vae", device)
+    ) as (
         params,
         run,
     ):
-        params = _with_device(params, "vae", device)
         with progress(params.vae.max_epochs, "train-vae", quiet=quiet, unit="epochs") as bar:
             fitted = fit_vae(
                 rollouts,
@@ -276,11 +292,12 @@ def train_lstm_command(
     from pipeline.worldmodel.fit import fit_lstm
     from pipeline.worldmodel.training import save_lstm
 
-    with _stage("train-lstm", params_path, overrides, no_tracking, ("seed", "lstm")) as (
+    with _stage(
+        "train-lstm", params_path, overrides, no_tracking, ("seed", "lstm"), ("lstm", device)
+    ) as (
         params,
         run,
     ):
-        params = _with_device(params, "lstm", device)
         with progress(params.lstm.max_epochs, "train-lstm", quiet=quiet, unit="epochs") as bar:
             fitted = fit_lstm(
                 rollouts,
@@ -390,11 +407,17 @@ def train_agent_command(
     from pipeline.io import write_json_atomic
 
     name = f"{variant}/seed-{seed}"
-    with _stage(f"train-agent/{name}", params_path, overrides, no_tracking, ("env", "agent")) as (
+    with _stage(
+        f"train-agent/{name}",
+        params_path,
+        overrides,
+        no_tracking,
+        ("env", "agent"),
+        ("agent", device),
+    ) as (
         params,
         run,
     ):
-        params = _with_device(params, "agent", device)
         p = params.agent
         identity = run_identity(variant, p, params.env, seed, vae, lstm)
         checkpoint = checkpoint_file(checkpoint_dir, identity)
@@ -485,11 +508,12 @@ def evaluate(
     if method not in METHODS:
         raise UserError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
     sections = ("env", "eval", "experiment", "baselines")
-    with _stage(f"evaluate/{method}", params_path, overrides, no_tracking, sections) as (
+    with _stage(
+        f"evaluate/{method}", params_path, overrides, no_tracking, sections, ("eval", device)
+    ) as (
         params,
         run,
     ):
-        params = _with_device(params, "eval", device)
         agent_paths = None
         if method in AGENT_METHODS:
             agent_paths = {s: agents_dir / method / f"seed-{s}.pt" for s in params.experiment.seeds}

@@ -263,3 +263,29 @@ def test_agent_and_evaluation_commands_reject_bad_input(
     assert result.exit_code == 2, result.output
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["train-vae", "--device", "cuda"],
+        ["train-lstm", "--device", "cuda"],
+        ["train-agent", "--variant", "maspm", "--device", "cuda"],
+        ["train-agent", "--variant", "maspm", "--set", "agent.device=cuda"],
+        ["evaluate", "--method", "orca", "--device", "cuda"],
+        ["bench", "train", "--variant", "maspm", "--device", "cuda"],
+    ],
+)
+def test_cuda_without_a_gpu_is_one_line_before_any_run(
+    workdir: Path, monkeypatch: pytest.MonkeyPatch, args: list[str]
+) -> None:
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1, result.output
+    assert lines[0] == (
+        f"error: device 'cuda': CUDA is not available here (torch {torch.__version__}); "
+        "use auto or cpu"
+    )
+    assert not (workdir / "mlflow.db").exists()  # no MLflow run was opened

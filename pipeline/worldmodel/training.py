@@ -42,10 +42,20 @@ class ModelFileError(ValueError):
 
 
 def resolve_device(device: torch.device | str) -> torch.device:
-    """``torch.device`` from a device or a name; ``"auto"`` picks CUDA when available."""
+    """``torch.device`` from a device or a name; ``"auto"`` picks CUDA when available.
+
+    Raises:
+        ValueError: CUDA is asked for and this PyTorch has no CUDA device to give.
+    """
     if isinstance(device, str) and device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
+    resolved = torch.device(device)
+    if resolved.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(
+            f"device {str(device)!r}: CUDA is not available here (torch {torch.__version__}); "
+            "use auto or cpu"
+        )
+    return resolved
 
 
 def _as_tensor(array: np.ndarray | torch.Tensor, device: torch.device) -> torch.Tensor:
