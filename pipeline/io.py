@@ -11,8 +11,10 @@ from __future__ import annotations
 import json
 import math
 import os
+import pickle
 import secrets
 import shutil
+import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -135,3 +137,37 @@ def _jsonable(value: Any) -> Any:
     if hasattr(value, "tolist"):  # numpy scalars and arrays, torch tensors
         return _jsonable(value.tolist())
     raise TypeError(f"cannot write {type(value).__name__} as JSON: {value!r}")
+
+
+def load_torch_file(
+    path: str | os.PathLike[str], what: str, error: type[ValueError] = ValueError
+) -> Any:
+    """``torch.load`` of a file that socnav-wm wrote: tensors and plain values, loaded on the CPU
+    with PyTorch's weights-only unpickler (never arbitrary objects).
+
+    Raises:
+        error: one line naming the file and, in words, why it cannot be read as a ``what``:
+            truncated or not a ``torch.save`` archive, or holding objects this project never
+            saves (PyTorch's own message would suggest ``weights_only=False``, which would run
+            whatever the file holds).
+    """
+    import torch
+
+    path = Path(path)
+    if not zipfile.is_zipfile(path):
+        raise error(f"{path}: not a readable {what} (truncated, or not written by torch.save)")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise error(
+            f"{path}: not a readable {what} (it holds objects other than tensors and plain "
+            "values, which socnav-wm never saves; not loaded)"
+        ) from exc
+    except Exception as exc:  # torch raises many types for damaged archives
+        raise error(f"{path}: not a readable {what} ({first_line(exc)})") from exc
+
+
+def first_line(exc: BaseException) -> str:
+    """An exception's message cut to one line of at most 200 characters (its type if empty)."""
+    text = str(exc).strip().splitlines()
+    return text[0][:200] if text else type(exc).__name__

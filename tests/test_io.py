@@ -1,4 +1,5 @@
-"""Atomic outputs: the target is the old content or the complete new one, never half."""
+"""Atomic outputs: the target is the old content or the complete new one, never half; reading
+back the files torch.save wrote, with one-line errors."""
 
 from __future__ import annotations
 
@@ -9,8 +10,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
-from pipeline.io import atomic_path, write_bytes_atomic, write_json_atomic, write_text_atomic
+from pipeline.io import (
+    atomic_path,
+    load_torch_file,
+    write_bytes_atomic,
+    write_json_atomic,
+    write_text_atomic,
+)
 
 
 def test_replaces_the_target_and_leaves_no_temp(tmp_path: Path) -> None:
@@ -124,3 +132,35 @@ def test_write_json_atomic_rejects_unknown_types_and_keeps_old_file(tmp_path: Pa
         write_json_atomic(target, {"bad": object()})
     assert json.loads(target.read_text()) == {"ok": 1}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json"]
+
+
+class _Foreign:
+    """An object the weights-only unpickler refuses (module-level so torch.save can pickle it)."""
+
+
+class _FileError(ValueError):
+    pass
+
+
+def test_load_torch_file_reads_tensors_and_explains_what_it_cannot(tmp_path: Path) -> None:
+    good = tmp_path / "good.pt"
+    torch.save({"format": "x", "weights": torch.arange(3.0)}, good)
+    payload = load_torch_file(good, "model file")
+    assert payload["format"] == "x" and torch.equal(payload["weights"], torch.arange(3.0))
+
+    text = tmp_path / "text.pt"
+    text.write_text("garbage\n")
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(good.read_bytes()[:300])
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"object": _Foreign()}, foreign)
+    cases = [
+        (text, "(truncated, or not written by torch.save)"),
+        (truncated, "(truncated, or not written by torch.save)"),
+        (foreign, "(it holds objects other than tensors and plain values, which socnav-wm never "
+                  "saves; not loaded)"),
+    ]  # fmt: skip
+    for path, reason in cases:
+        with pytest.raises(_FileError) as error:
+            load_torch_file(path, "model file", _FileError)
+        assert str(error.value) == f"{path}: not a readable model file {reason}"

@@ -53,7 +53,7 @@ from pipeline.agents.replay import Batch, NStepAccumulator, ReplayBuffer
 from pipeline.env.core import NUM_ACTIONS, Simulator
 from pipeline.env.params import EnvParams
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_NAMES, COLLISION_WALL, BatchState
-from pipeline.io import atomic_path
+from pipeline.io import atomic_path, first_line, load_torch_file
 from pipeline.progress import progress
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.training import load_lstm, load_vae, resolve_device
@@ -459,10 +459,7 @@ def checkpoint_file(directory: str | Path, identity: dict[str, Any]) -> Path:
 
 
 def _load_checkpoint(path: Path, identity: dict[str, Any]) -> dict[str, Any]:
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for garbage input
-        raise ValueError(f"{path}: not a readable checkpoint ({_reason(exc)})") from exc
+    payload = load_torch_file(path, "checkpoint")
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(f"{path}: not a socnav-wm agent checkpoint")
     if payload.get("format_version") != CHECKPOINT_FORMAT_VERSION:
@@ -482,11 +479,6 @@ def _load_checkpoint(path: Path, identity: dict[str, Any]) -> dict[str, Any]:
                 "delete it or train without --resume"
             )
     return payload
-
-
-def _reason(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return (text.splitlines()[0] if text else type(exc).__name__)[:200]
 
 
 def train_agent(
@@ -843,10 +835,7 @@ def load_agent(path: str | Path, device: torch.device | str = "cpu") -> Agent:
     path = Path(path)
     if not path.is_file():
         raise AgentFileError(f"{path}: no such agent file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for garbage input
-        raise AgentFileError(f"{path}: not a readable agent file ({_reason(exc)})") from exc
+    payload = load_torch_file(path, "agent file", AgentFileError)
     if not isinstance(payload, dict) or payload.get("format") != AGENT_FORMAT:
         raise AgentFileError(f"{path}: not a socnav-wm agent file")
     if payload.get("format_version") != AGENT_FORMAT_VERSION:
@@ -877,7 +866,7 @@ def load_agent(path: str | Path, device: torch.device | str = "cpu") -> Agent:
             device=target,
         )
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
-        raise AgentFileError(f"{path}: agent does not load ({_reason(exc)})") from exc
+        raise AgentFileError(f"{path}: agent does not load ({first_line(exc)})") from exc
     if variant.feature_dim != q_network.input_dim:
         raise AgentFileError(
             f"{path}: the Q-network reads {q_network.input_dim} features, "

@@ -24,7 +24,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from pipeline.data.windows import Windows
-from pipeline.io import atomic_path
+from pipeline.io import atomic_path, first_line, load_torch_file
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.vae import VAE, vae_loss
 
@@ -503,11 +503,7 @@ def load_checkpoint(path: str | Path, kind: str) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such model file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for garbage input
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ModelFileError(f"{path}: not a readable model file ({reason[:200]})") from exc
+    payload = load_torch_file(path, "model file", ModelFileError)
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise ModelFileError(f"{path}: not a socnav-wm model file")
     if payload.get("format_version") != CHECKPOINT_FORMAT_VERSION:
@@ -527,8 +523,7 @@ def _build(path: Path, payload: dict[str, Any], model_type: type, device: torch.
         model = model_type(**payload["hyperparameters"])
         model.load_state_dict(payload["state_dict"])
     except (KeyError, TypeError, RuntimeError) as exc:
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ModelFileError(f"{path}: weights do not fit the model ({reason[:200]})") from exc
+        raise ModelFileError(f"{path}: weights do not fit the model ({first_line(exc)})") from exc
     return model.to(resolve_device(device)).eval()
 
 
