@@ -441,7 +441,16 @@ def _translate(exc: ValidationError, source: str, origins: Mapping[str, str]) ->
     key, message = _describe(errors[0])
     more = len(errors) - 1
     tail = f" (and {more} more error{'s' if more > 1 else ''})" if more else ""
-    return ConfigError(f"{origins.get(key, source)}: {message}{tail}")
+    # An error inside a value (``agent.trunk_sizes.1``) comes from the --set of the whole value.
+    origin = next(
+        (
+            label
+            for set_key, label in origins.items()
+            if key == set_key or key.startswith(f"{set_key}.")
+        ),
+        source,
+    )
+    return ConfigError(f"{origin}: {message}{tail}")
 
 
 def _describe(error: Mapping[str, Any]) -> tuple[str, str]:

@@ -243,6 +243,11 @@ def test_top_level_must_be_a_mapping(tmp_path: Path) -> None:
         ("env.room_size=-1", "--set env.room_size=-1: env.room_size: must be > 0"),
         ("env.human_policy=x", "--set env.human_policy=x: env.human_policy: must be one of"),
         ("vae.batch_size=[1", "--set vae.batch_size=[1: not valid YAML ("),
+        (  # an error inside the value still names the --set that wrote the whole value
+            "agent.trunk_sizes=[512,abc]",
+            "--set agent.trunk_sizes=[512,abc]: agent.trunk_sizes.1: Input should be a valid "
+            "integer",
+        ),
     ],
 )
 def test_override_errors_name_the_override(tmp_path: Path, override: str, expected: str) -> None:
@@ -255,6 +260,8 @@ def test_bad_value_in_file_still_names_the_file_when_other_keys_are_overridden(
 ) -> None:
     path = write(tmp_path, "vae:\n  batch_size: -3\n")
     assert error_of(path, ("vae.kl_weight=0.5",)).startswith(f"{path}: vae.batch_size: ")
+    path = write(tmp_path, "agent:\n  trunk_sizes: [5, x]\n")
+    assert error_of(path, ("agent.gamma=0.9",)).startswith(f"{path}: agent.trunk_sizes.1: ")
 
 
 # --- output ------------------------------------------------------------------------------------
