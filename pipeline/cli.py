@@ -165,10 +165,8 @@ def collect(
     from pipeline.io import atomic_path, write_json_atomic
     from pipeline.progress import progress
 
-    with _stage("collect", params_path, overrides, no_tracking, ("seed", "env", "collect")) as (
-        params,
-        run,
-    ):
+    stage = _stage("collect", params_path, overrides, no_tracking, ("seed", "env", "collect"))
+    with stage as (params, run):
         c = params.collect
         # The whole directory appears at once: a killed run never leaves a partial dataset.
         with (
@@ -194,10 +192,28 @@ def collect(
     )
 
 
-def _log_summary(run: Any, summary: dict[str, float], history: list[dict[str, float]]) -> None:
-    """Log the final metrics, leaving out the per-epoch series (their curves stay clean)."""
-    per_epoch = set().union(*(row.keys() for row in history))
+def _world_model_outputs(
+    run: Any,
+    params: Any,
+    model: Path,
+    metrics: Path,
+    history: Path,
+    summary: dict[str, float],
+    epochs: list[dict[str, float]],
+) -> None:
+    """What a world-model stage writes beside its model file, and logs with it to MLflow: the
+    resolved params, the metrics and the per-epoch history (JSON), the final metrics (without
+    the per-epoch series, so their curves stay clean)."""
+    from pipeline.config import save_resolved
+    from pipeline.io import write_json_atomic
+
+    save_resolved(params, _config_path(model))
+    write_json_atomic(metrics, summary)
+    write_json_atomic(history, epochs)
+    per_epoch = set().union(*(row.keys() for row in epochs))
     run.log_metrics({key: value for key, value in summary.items() if key not in per_epoch})
+    run.log_artifact(model)
+    run.log_artifact(_config_path(model))
 
 
 def _epoch_logger(run: Any, bar: Any) -> Callable[[int, dict[str, float]], None]:
@@ -229,18 +245,14 @@ def train_vae_command(
     quiet: QuietOption = False,
 ) -> None:
     """Train the VAE (23-d observation → latent) on the rollouts (stage `train-vae`)."""
-    from pipeline.config import save_resolved
-    from pipeline.io import write_json_atomic
     from pipeline.progress import progress
     from pipeline.worldmodel.fit import fit_vae
     from pipeline.worldmodel.training import save_vae
 
-    with _stage(
+    stage = _stage(
         "train-vae", params_path, overrides, no_tracking, ("seed", "vae"), ("vae", device)
-    ) as (
-        params,
-        run,
-    ):
+    )
+    with stage as (params, run):
         with progress(params.vae.max_epochs, "train-vae", quiet=quiet, unit="epochs") as bar:
             fitted = fit_vae(
                 rollouts,
@@ -252,12 +264,7 @@ def train_vae_command(
         result = fitted.result
         summary = {**result.metrics, **fitted.data}
         save_vae(out, result, extra={"metrics": summary, "params": params.vae.model_dump()})
-        save_resolved(params, _config_path(out))
-        write_json_atomic(metrics, summary)
-        write_json_atomic(history, result.history)
-        _log_summary(run, summary, result.history)
-        run.log_artifact(out)
-        run.log_artifact(_config_path(out))
+        _world_model_outputs(run, params, out, metrics, history, summary, result.history)
         run.log_figure(fitted.figure(), "figures/reconstruction.png")
     typer.echo(
         f"wrote {out}: validation reconstruction MSE {result.metrics['val_recon_mse']:.4f} "
@@ -286,18 +293,14 @@ def train_lstm_command(
     quiet: QuietOption = False,
 ) -> None:
     """Train the LSTM world model on VAE latents of the rollouts (stage `train-lstm`)."""
-    from pipeline.config import save_resolved
-    from pipeline.io import write_json_atomic
     from pipeline.progress import progress
     from pipeline.worldmodel.fit import fit_lstm
     from pipeline.worldmodel.training import save_lstm
 
-    with _stage(
+    stage = _stage(
         "train-lstm", params_path, overrides, no_tracking, ("seed", "lstm"), ("lstm", device)
-    ) as (
-        params,
-        run,
-    ):
+    )
+    with stage as (params, run):
         with progress(params.lstm.max_epochs, "train-lstm", quiet=quiet, unit="epochs") as bar:
             fitted = fit_lstm(
                 rollouts,
@@ -310,12 +313,7 @@ def train_lstm_command(
         result = fitted.result
         summary = {**result.metrics, **fitted.metrics, **fitted.data}
         save_lstm(out, result, extra={"metrics": summary, "params": params.lstm.model_dump()})
-        save_resolved(params, _config_path(out))
-        write_json_atomic(metrics, summary)
-        write_json_atomic(history, result.history)
-        _log_summary(run, summary, result.history)
-        run.log_artifact(out)
-        run.log_artifact(_config_path(out))
+        _world_model_outputs(run, params, out, metrics, history, summary, result.history)
         run.log_figure(fitted.figure(), "figures/latent_predictions.png")
     m = fitted.metrics
     typer.echo(
@@ -407,17 +405,15 @@ def train_agent_command(
     from pipeline.io import write_json_atomic
 
     name = f"{variant}/seed-{seed}"
-    with _stage(
+    stage = _stage(
         f"train-agent/{name}",
         params_path,
         overrides,
         no_tracking,
         ("env", "agent"),
         ("agent", device),
-    ) as (
-        params,
-        run,
-    ):
+    )
+    with stage as (params, run):
         p = params.agent
         identity = run_identity(variant, p, params.env, seed, vae, lstm)
         checkpoint = checkpoint_file(checkpoint_dir, identity)
@@ -508,12 +504,10 @@ def evaluate(
     if method not in METHODS:
         raise UserError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
     sections = ("env", "eval", "experiment", "baselines")
-    with _stage(
+    stage = _stage(
         f"evaluate/{method}", params_path, overrides, no_tracking, sections, ("eval", device)
-    ) as (
-        params,
-        run,
-    ):
+    )
+    with stage as (params, run):
         agent_paths = None
         if method in AGENT_METHODS:
             agent_paths = {s: agents_dir / method / f"seed-{s}.pt" for s in params.experiment.seeds}

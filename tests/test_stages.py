@@ -75,7 +75,7 @@ def _invoke(*args: str):
 
 def test_collect_vae_lstm_write_every_output_and_mlflow_runs(workdir: Path) -> None:
     _invoke("collect")
-    _invoke("train-vae")
+    _invoke("train-vae", "--device", "auto")  # the params file says cpu
     out = _invoke("train-lstm").output
     assert "1-step latent MSE" in out
 
@@ -101,9 +101,13 @@ def test_collect_vae_lstm_write_every_output_and_mlflow_runs(workdir: Path) -> N
     vae_run = next(run for run in runs if run.data.tags["stage"] == "train-vae")
     assert vae_run.info.status == "FINISHED"
     assert vae_run.data.params["vae.hidden_dim"] == "32"
+    assert vae_run.data.params["vae.device"] == "auto"  # the run logs what --device set
+    assert yaml.safe_load((workdir / "models/vae.params.yaml").read_text())["vae"]["device"] == (
+        "auto"
+    )
     assert len(client.get_metric_history(vae_run.info.run_id, "val_loss")) == 3
     artifacts = {a.path for a in client.list_artifacts(vae_run.info.run_id)}
-    assert {"vae.pt", "figures"} <= artifacts
+    assert {"vae.pt", "vae.params.yaml", "figures"} <= artifacts
 
 
 def test_overrides_apply_and_are_saved(workdir: Path) -> None:
