@@ -167,6 +167,43 @@ def load_torch_file(
         raise error(f"{path}: not a readable {what} ({first_line(exc)})") from exc
 
 
+def load_saved(
+    path: str | os.PathLike[str],
+    what: str,
+    file_format: str,
+    version: int,
+    error: type[ValueError] = ValueError,
+) -> dict[str, Any]:
+    """The dict of a socnav-wm file (model, agent, checkpoint), read by :func:`load_torch_file`
+    and checked: it exists, its ``format`` is ``file_format`` and its ``format_version`` is
+    ``version``; otherwise ``error`` with one line naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: no such {what}")
+    payload = load_torch_file(path, what, error)
+    check_format(payload, path, what, file_format, version, error)
+    return payload
+
+
+def check_format(
+    header: object,
+    path: str | os.PathLike[str],
+    what: str,
+    file_format: str,
+    version: int,
+    error: type[ValueError] = ValueError,
+) -> None:
+    """``header`` (a saved dict, or a Parquet file's metadata) names ``file_format`` and
+    ``version``; otherwise ``error``: not a socnav-wm ``what``, or of another format version."""
+    if not isinstance(header, dict) or header.get("format") != file_format:
+        raise error(f"{path}: not a socnav-wm {what}")
+    if header.get("format_version") != version:
+        raise error(
+            f"{path}: {what} format version {header.get('format_version')!r}, "
+            f"this code reads version {version}"
+        )
+
+
 def first_line(exc: BaseException) -> str:
     """An exception's message cut to one line of at most 200 characters (its type if empty)."""
     text = str(exc).strip().splitlines()

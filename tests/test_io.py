@@ -14,6 +14,7 @@ import torch
 
 from pipeline.io import (
     atomic_path,
+    load_saved,
     load_torch_file,
     write_bytes_atomic,
     write_json_atomic,
@@ -164,3 +165,20 @@ def test_load_torch_file_reads_tensors_and_explains_what_it_cannot(tmp_path: Pat
         with pytest.raises(_FileError) as error:
             load_torch_file(path, "model file", _FileError)
         assert str(error.value) == f"{path}: not a readable model file {reason}"
+
+
+def test_load_saved_checks_existence_format_and_version(tmp_path: Path) -> None:
+    good, foreign, old = tmp_path / "good.pt", tmp_path / "foreign.pt", tmp_path / "old.pt"
+    torch.save({"format": "socnav-wm-x", "format_version": 2, "w": torch.ones(2)}, good)
+    torch.save({"weights": torch.ones(2)}, foreign)
+    torch.save({"format": "socnav-wm-x", "format_version": 1}, old)
+    assert torch.equal(load_saved(good, "x file", "socnav-wm-x", 2)["w"], torch.ones(2))
+    cases = [
+        (tmp_path / "missing.pt", "no such x file"),
+        (foreign, "not a socnav-wm x file"),
+        (old, "x file format version 1, this code reads version 2"),
+    ]
+    for path, problem in cases:
+        with pytest.raises(_FileError) as error:
+            load_saved(path, "x file", "socnav-wm-x", 2, _FileError)
+        assert str(error.value) == f"{path}: {problem}"

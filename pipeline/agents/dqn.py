@@ -53,7 +53,7 @@ from pipeline.agents.replay import Batch, NStepAccumulator, ReplayBuffer
 from pipeline.env.core import NUM_ACTIONS, Simulator
 from pipeline.env.params import EnvParams
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_NAMES, COLLISION_WALL, BatchState
-from pipeline.io import atomic_path, first_line, load_torch_file
+from pipeline.io import atomic_path, first_line, load_saved
 from pipeline.progress import progress
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.training import load_lstm, load_vae, resolve_device
@@ -459,14 +459,7 @@ def checkpoint_file(directory: str | Path, identity: dict[str, Any]) -> Path:
 
 
 def _load_checkpoint(path: Path, identity: dict[str, Any]) -> dict[str, Any]:
-    payload = load_torch_file(path, "checkpoint")
-    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a socnav-wm agent checkpoint")
-    if payload.get("format_version") != CHECKPOINT_FORMAT_VERSION:
-        raise ValueError(
-            f"{path}: checkpoint format version {payload.get('format_version')!r}, "
-            f"this code reads version {CHECKPOINT_FORMAT_VERSION}"
-        )
+    payload = load_saved(path, "agent checkpoint", CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION)
     saved = payload["run"]
     for key in ("variant", "seed", "params", "env_params", "world_model"):
         if saved.get(key) != identity[key]:
@@ -833,16 +826,7 @@ def load_agent(path: str | Path, device: torch.device | str = "cpu") -> Agent:
             file, of another format version, or when its weights do not fit.
     """
     path = Path(path)
-    if not path.is_file():
-        raise AgentFileError(f"{path}: no such agent file")
-    payload = load_torch_file(path, "agent file", AgentFileError)
-    if not isinstance(payload, dict) or payload.get("format") != AGENT_FORMAT:
-        raise AgentFileError(f"{path}: not a socnav-wm agent file")
-    if payload.get("format_version") != AGENT_FORMAT_VERSION:
-        raise AgentFileError(
-            f"{path}: agent format version {payload.get('format_version')!r}, "
-            f"this code reads version {AGENT_FORMAT_VERSION}"
-        )
+    payload = load_saved(path, "agent file", AGENT_FORMAT, AGENT_FORMAT_VERSION, AgentFileError)
     target = resolve_device(device)
     try:
         params = AgentParams.from_dict(payload["params"])

@@ -40,7 +40,7 @@ from pipeline.agents.params import BASELINE_NAMES, METHOD_NAMES, VARIANT_NAMES
 from pipeline.env.params import EnvParams
 from pipeline.env.rollout import Episode, run_episodes
 from pipeline.evaluation.stats import mean_ci_crossed
-from pipeline.io import atomic_path, write_json_atomic
+from pipeline.io import atomic_path, check_format, write_json_atomic
 from pipeline.metrics import (
     ALL_METRICS,
     METRIC_UNITS,
@@ -632,13 +632,7 @@ def evaluation_metadata(path: str | Path) -> dict[str, Any]:
     if raw is None:
         raise ValueError(f"{path}: not a socnav-wm evaluation file (no run metadata)")
     metadata = json.loads(raw)
-    if metadata.get("format") != EVAL_FORMAT:
-        raise ValueError(f"{path}: not a socnav-wm evaluation file")
-    if metadata.get("format_version") != EVAL_FORMAT_VERSION:
-        raise ValueError(
-            f"{path}: evaluation format version {metadata.get('format_version')!r}, this code "
-            f"reads version {EVAL_FORMAT_VERSION}"
-        )
+    check_format(metadata, path, "evaluation file", EVAL_FORMAT, EVAL_FORMAT_VERSION)
     return metadata
 
 

@@ -24,7 +24,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from pipeline.data.windows import Windows
-from pipeline.io import atomic_path, first_line, load_torch_file
+from pipeline.io import atomic_path, first_line, load_saved
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.vae import VAE, vae_loss
 
@@ -500,17 +500,9 @@ def load_checkpoint(path: str | Path, kind: str) -> dict[str, Any]:
         ModelFileError: one line naming the file when it is missing, unreadable, not a
             socnav-wm model, of another format version, or of another kind.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise ModelFileError(f"{path}: no such model file")
-    payload = load_torch_file(path, "model file", ModelFileError)
-    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
-        raise ModelFileError(f"{path}: not a socnav-wm model file")
-    if payload.get("format_version") != CHECKPOINT_FORMAT_VERSION:
-        raise ModelFileError(
-            f"{path}: model format version {payload.get('format_version')!r}, "
-            f"this code reads version {CHECKPOINT_FORMAT_VERSION}"
-        )
+    payload = load_saved(
+        path, "model file", CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, ModelFileError
+    )
     if payload.get("kind") != kind:
         raise ModelFileError(
             f"{path}: holds a {payload.get('kind')!r} model, expected a {kind!r} model"

@@ -380,7 +380,7 @@ def test_resume_refuses_another_runs_checkpoint(tmp_path: Path) -> None:
         "delete it or train without --resume"
     )
     checkpoint.write_bytes(b"not a checkpoint")
-    with pytest.raises(ValueError, match="not a readable checkpoint"):
+    with pytest.raises(ValueError, match="not a readable agent checkpoint"):
         train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0,
                     checkpoint_path=checkpoint, resume=True)  # fmt: skip
 

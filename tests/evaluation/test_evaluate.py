@@ -17,6 +17,7 @@ from pipeline.evaluation.evaluate import (
     AGENT_METHODS,
     BASELINE_METHODS,
     BASELINE_SEED,
+    METADATA_KEY,
     METHODS,
     OUTCOMES,
     episode_from_trajectories,
@@ -102,6 +103,25 @@ def test_summarise_refuses_mixed_methods():
 
 
 # ------------------------------------------------------------------ baselines, files
+
+
+def test_evaluation_metadata_names_a_foreign_or_older_file(tmp_path):
+    table = pa.table({"x": [1.0]})
+    cases = [
+        (None, "not a socnav-wm evaluation file (no run metadata)"),
+        ({"format": "other"}, "not a socnav-wm evaluation file"),
+        (
+            {"format": "socnav-wm-eval", "format_version": 0},
+            "evaluation file format version 0, this code reads version 1",
+        ),
+    ]
+    for number, (header, problem) in enumerate(cases):
+        path = tmp_path / f"{number}.parquet"
+        metadata = None if header is None else {METADATA_KEY: json.dumps(header).encode()}
+        pq.write_table(table.replace_schema_metadata(metadata), path)
+        with pytest.raises(ValueError) as error:
+            evaluation_metadata(path)
+        assert str(error.value) == f"{path}: {problem}"
 
 
 @pytest.mark.parametrize("method", ["orca", "sfm"])
