@@ -224,6 +224,12 @@ class Simulator:
         s.alive_sum[envs] = 0.0
         s.discomfort_sum[envs] = 0.0
         s.done[envs] = False
+        self._observe(envs)
+
+    # ------------------------------------------------------------------ step
+    def _observe(self, envs: np.ndarray) -> None:
+        """Write the observations of environments ``envs`` into the observation buffer."""
+        s = self.state
         observe(
             s.robot_xy,
             s.robot_theta,
@@ -233,12 +239,11 @@ class Simulator:
             s.human_xy,
             s.human_heading,
             s.human_speed,
-            p.human_radius,
+            self.params.human_radius,
             envs,
             self._obs,
         )
 
-    # ------------------------------------------------------------------ step
     def commands(self, actions: Any) -> tuple[np.ndarray, np.ndarray]:
         """(v, ω) arrays from discrete actions (N,) or continuous commands (N, 2), clipped."""
         a = np.asarray(actions)
@@ -315,19 +320,7 @@ class Simulator:
             self._reward,
         )
         envs = np.flatnonzero(active)
-        observe(
-            s.robot_xy,
-            s.robot_theta,
-            s.robot_v,
-            s.robot_omega,
-            s.goal_xy,
-            s.human_xy,
-            s.human_heading,
-            s.human_speed,
-            p.human_radius,
-            envs,
-            self._obs,
-        )
+        self._observe(envs)
         truncated = self._truncated.copy()
         s.done |= terminated | truncated
         info = self.info()
