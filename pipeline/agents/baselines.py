@@ -201,7 +201,28 @@ class OrcaBaselineParams:
             )
 
 
-class OrcaBaseline:
+class _VelocityBaseline:
+    """A baseline that picks a world-frame velocity (:meth:`desired_velocity`) and drives the
+    robot towards it with :func:`unicycle_command`."""
+
+    config: OrcaBaselineParams | SfmBaselineParams
+
+    def desired_velocity(self, state: BatchState, params: EnvParams) -> np.ndarray:
+        raise NotImplementedError
+
+    def act(self, state: BatchState, params: EnvParams) -> np.ndarray:
+        """(N, 2) commands (v m/s, ω rad/s) for every env."""
+        return unicycle_command(
+            self.desired_velocity(state, params),
+            state.robot_theta,
+            max_speed=params.robot_max_speed,
+            max_rotation=params.robot_max_rotation,
+            dt=params.dt,
+            heading_gain=self.config.heading_gain,
+        )
+
+
+class OrcaBaseline(_VelocityBaseline):
     """The robot as one ORCA agent among the humans (RVO2's algorithm, batched).
 
     Every step, per env, the robot (radius + ``safety_margin``, max speed the robot's) solves
@@ -268,17 +289,6 @@ class OrcaBaseline:
         )
         return new_velocity[:, 0]
 
-    def act(self, state: BatchState, params: EnvParams) -> np.ndarray:
-        """(N, 2) commands (v m/s, ω rad/s) for every env."""
-        return unicycle_command(
-            self.desired_velocity(state, params),
-            state.robot_theta,
-            max_speed=params.robot_max_speed,
-            max_rotation=params.robot_max_rotation,
-            dt=params.dt,
-            heading_gain=self.config.heading_gain,
-        )
-
 
 # --------------------------------------------------------------------------------------------
 # Social Force Model
@@ -332,7 +342,7 @@ class SfmBaselineParams:
             )
 
 
-class SfmBaseline:
+class SfmBaseline(_VelocityBaseline):
     """The robot driven by the Social Force Model, batched with numpy.
 
     Per env: goal attraction at full speed with relaxation time τ, exponential repulsion from
@@ -387,17 +397,6 @@ class SfmBaseline:
         speed = np.linalg.norm(desired, axis=-1, keepdims=True)
         scale = np.minimum(1.0, params.robot_max_speed / np.maximum(speed, _MIN_SPEED))
         return desired * scale
-
-    def act(self, state: BatchState, params: EnvParams) -> np.ndarray:
-        """(N, 2) commands (v m/s, ω rad/s) for every env."""
-        return unicycle_command(
-            self.desired_velocity(state, params),
-            state.robot_theta,
-            max_speed=params.robot_max_speed,
-            max_rotation=params.robot_max_rotation,
-            dt=params.dt,
-            heading_gain=self.config.heading_gain,
-        )
 
 
 # --------------------------------------------------------------------------------------------
