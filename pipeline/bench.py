@@ -1,20 +1,27 @@
 """Benchmarks: speed and memory of the pipeline's hot paths, measured, never asserted.
 
 Each benchmark returns rows (dicts) that ``socnav-wm bench …`` prints as a table. Timings run
-after a warm-up (numba compilation, first allocations), for a fixed wall-clock budget per row,
-pinned to one CPU core where the OS allows it so that numbers from different machines compare.
+after a warm-up (numba compilation, first allocations), for a fixed wall-clock budget per row.
+The simulator and collection benchmarks are pinned to one CPU core where the OS allows it, so
+that numbers from different machines compare; the training benchmark uses the threads torch is
+given, as a training does.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 import tracemalloc
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from pipeline.agents.params import AgentParams
+    from pipeline.env.params import EnvParams
 
 ENV_BATCH_SIZES = (1, 64, 1024, 4096)
 ENV_POLICIES = ("sfm", "orca", "mixed")
@@ -35,14 +42,25 @@ def one_core() -> Iterator[str]:
         os.sched_setaffinity(0, before)
 
 
-def _rate(step: Callable[[], int], seconds: float) -> float:
-    """Items per second of ``step`` (which returns how many items it did) over ``seconds``."""
+def _rate(
+    step: Callable[[], int], seconds: float, synchronize: Callable[[], None] | None = None
+) -> float:
+    """Items per second of ``step`` (which returns how many items it did) over ``seconds``.
+
+    ``synchronize`` (``torch.cuda.synchronize`` on a GPU) waits for the work ``step`` queued,
+    before the clock starts and before it stops.
+    """
+    if synchronize is not None:
+        synchronize()
     done = 0
     start = time.perf_counter()
     while True:
         done += step()
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
+            if synchronize is not None:
+                synchronize()
+                elapsed = time.perf_counter() - start
             return done / elapsed
 
 
@@ -165,3 +183,99 @@ def bench_collect(
                 }
             )
     return rows
+
+
+def bench_train(
+    variant: str,
+    *,
+    params: AgentParams | None = None,
+    env_params: EnvParams | None = None,
+    seconds: float = 3.0,
+    latent_dim: int = 16,
+    vae_hidden_dim: int = 256,
+    lstm_hidden_dim: int = 256,
+) -> dict[str, Any]:
+    """Env-steps/s (acting + simulator + features + storing) and gradient updates/s, measured
+    separately, with a random-initialised world model of the given sizes (the paper's by
+    default).
+
+    ``params`` is the ``agent`` section the training would use (the variant's preset is applied
+    here); ``num_envs`` environments are stepped together and each update reads ``batch_size``
+    transitions. Returns ``{"variant", "feature_dim", "num_envs", "batch_size",
+    "env_steps_per_s", "updates_per_s"}``. Each rate is measured for ``seconds`` after a short
+    warm-up.
+    """
+    import torch
+
+    from pipeline.agents.dqn import DQNLearner, variant_for
+    from pipeline.agents.features import VARIANTS
+    from pipeline.agents.params import AgentParams, check_variant
+    from pipeline.agents.replay import ReplayBuffer
+    from pipeline.env.core import NUM_ACTIONS, Simulator
+    from pipeline.env.params import EnvParams
+    from pipeline.worldmodel.lstm import LatentLSTM
+    from pipeline.worldmodel.training import resolve_device
+    from pipeline.worldmodel.vae import VAE
+
+    check_variant(variant)
+    env_params = env_params or EnvParams()
+    p = (params or AgentParams()).resolved(variant)
+    num_envs, batch_size = p.num_envs, p.batch_size
+    p = dataclasses.replace(
+        p,
+        learning_starts=batch_size,  # the benchmark calls the update itself
+        buffer_size=max(p.buffer_size, num_envs, batch_size),
+    )
+    target = resolve_device(p.device)
+    torch.manual_seed(0)
+    sim = Simulator(num_envs, env_params)
+    vae = lstm = None
+    if VARIANTS[variant].needs_world_model:
+        vae = VAE(sim.obs_dim, vae_hidden_dim, latent_dim)
+        lstm = LatentLSTM(latent_dim, NUM_ACTIONS, lstm_hidden_dim)
+    features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=target)
+    learner = DQNLearner(features_of.feature_dim, p, target)
+    replay = ReplayBuffer(p.buffer_size, features_of.feature_dim, target, seed=0)
+    rng = np.random.default_rng(0)
+
+    obs, _ = sim.reset(seed=0)
+    state = {"features": features_of.reset(obs)}
+
+    def env_step() -> int:
+        actions = learner.act(state["features"], 0.5, rng)
+        result = sim.step(actions)
+        done = result.terminated | result.truncated
+        reset_obs = None
+        if done.any():
+            sim.reset_envs(done)
+            reset_obs = sim.observation[done]
+        next_features, new_features = features_of.step(result.obs, actions, done, reset_obs)
+        replay.add(
+            state["features"], actions, result.reward, next_features, result.terminated, p.gamma
+        )
+        state["features"] = new_features
+        return num_envs
+
+    def update() -> int:
+        learner.update(replay.sample(batch_size))
+        return 1
+
+    synchronize = torch.cuda.synchronize if target.type == "cuda" else None
+
+    def rate(step: Callable[[], int]) -> float:
+        for _ in range(5):  # warm-up
+            step()
+        return _rate(step, seconds, synchronize)
+
+    env_rate = rate(env_step)
+    while len(replay) < batch_size:
+        env_step()
+    update_rate = rate(update)
+    return {
+        "variant": variant,
+        "feature_dim": features_of.feature_dim,
+        "num_envs": num_envs,
+        "batch_size": batch_size,
+        "env_steps_per_s": env_rate,
+        "updates_per_s": update_rate,
+    }

@@ -688,8 +688,8 @@ def bench_train_command(
     """Env-steps/s (act + simulate + world-model features + store) and gradient updates/s of
     the DQN learner, per variant, with the `agent` and `env` sections of the params file (e.g.
     `--set agent.num_envs=64`) and a random world model of the `vae`/`lstm` sections' sizes."""
-    from pipeline.agents.dqn import bench_train
     from pipeline.agents.params import VARIANT_NAMES, check_variant
+    from pipeline.bench import bench_train
     from pipeline.config import load_params
     from pipeline.worldmodel.training import resolve_device
 

@@ -2,7 +2,7 @@
 
 Modules: ``params`` (hyper-parameters and variant names; no torch), ``dueling`` (the network),
 ``features`` (the five variants), ``replay`` (uniform replay buffer), ``dqn`` (training loop,
-checkpoints, agent files, evaluation, benchmark).
+checkpoints, agent files, evaluation). The training benchmark is ``pipeline.bench.bench_train``.
 
 The names below are imported lazily, so ``from pipeline.agents.params import AgentParams`` (what
 the configuration does) does not pay for importing torch.
@@ -18,7 +18,6 @@ _EXPORTS = {
     "VARIANT_NAMES": "pipeline.agents.params",
     "Agent": "pipeline.agents.dqn",
     "TrainResult": "pipeline.agents.dqn",
-    "bench_train": "pipeline.agents.dqn",
     "evaluate_agent": "pipeline.agents.dqn",
     "load_agent": "pipeline.agents.dqn",
     "save_agent": "pipeline.agents.dqn",

@@ -32,7 +32,6 @@ Decisions that differ from the paper's code (paper_spec §5, §8), each document
 from __future__ import annotations
 
 import copy
-import dataclasses
 import hashlib
 import json
 import random
@@ -987,101 +986,4 @@ def training_metrics(result: TrainResult, greedy: Sequence[dict[str, Any]]) -> d
         "greedy_success_rate": float(np.mean([row["success"] for row in greedy])),
         "greedy_collision_rate": float(np.mean([row["collision"] != "none" for row in greedy])),
         "greedy_timeout_rate": float(np.mean([row["timeout"] for row in greedy])),
-    }
-
-
-# =============================================================================================
-# Speed benchmark
-# =============================================================================================
-
-
-def bench_train(
-    variant: str,
-    *,
-    params: AgentParams | None = None,
-    env_params: EnvParams | None = None,
-    seconds: float = 3.0,
-    latent_dim: int = 16,
-    vae_hidden_dim: int = 256,
-    lstm_hidden_dim: int = 256,
-) -> dict[str, Any]:
-    """Env-steps/s (acting + simulator + features + storing) and gradient updates/s, measured
-    separately, with a random-initialised world model of the given sizes (the paper's by
-    default).
-
-    ``params`` is the ``agent`` section the training would use (the variant's preset is applied
-    here); ``num_envs`` environments are stepped together and each update reads ``batch_size``
-    transitions. Returns ``{"variant", "feature_dim", "num_envs", "batch_size",
-    "env_steps_per_s", "updates_per_s"}``. Each rate is measured for ``seconds`` after a short
-    warm-up.
-    """
-    check_variant(variant)
-    env_params = env_params or EnvParams()
-    p = (params or AgentParams()).resolved(variant)
-    num_envs, batch_size = p.num_envs, p.batch_size
-    p = dataclasses.replace(
-        p,
-        learning_starts=batch_size,  # the benchmark calls the update itself
-        buffer_size=max(p.buffer_size, num_envs, batch_size),
-    )
-    target = resolve_device(p.device)
-    torch.manual_seed(0)
-    sim = Simulator(num_envs, env_params)
-    vae = lstm = None
-    if VARIANTS[variant].needs_world_model:
-        vae = VAE(sim.obs_dim, vae_hidden_dim, latent_dim)
-        lstm = LatentLSTM(latent_dim, NUM_ACTIONS, lstm_hidden_dim)
-    features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=target)
-    learner = DQNLearner(features_of.feature_dim, p, target)
-    replay = ReplayBuffer(p.buffer_size, features_of.feature_dim, target, seed=0)
-    rng = np.random.default_rng(0)
-
-    obs, _ = sim.reset(seed=0)
-    state = {"features": features_of.reset(obs)}
-
-    def env_step() -> int:
-        actions = learner.act(state["features"], 0.5, rng)
-        result = sim.step(actions)
-        done = result.terminated | result.truncated
-        reset_obs = None
-        if done.any():
-            sim.reset_envs(done)
-            reset_obs = sim.observation[done]
-        next_features, new_features = features_of.step(result.obs, actions, done, reset_obs)
-        replay.add(
-            state["features"], actions, result.reward, next_features, result.terminated, p.gamma
-        )
-        state["features"] = new_features
-        return num_envs
-
-    def update() -> int:
-        learner.update(replay.sample(batch_size))
-        return 1
-
-    def rate(step: Callable[[], int], duration: float) -> float:
-        for _ in range(5):
-            step()
-        if target.type == "cuda":
-            torch.cuda.synchronize()
-        done_items, begin = 0, time.perf_counter()
-        while True:
-            done_items += step()
-            elapsed = time.perf_counter() - begin
-            if elapsed >= duration:
-                if target.type == "cuda":
-                    torch.cuda.synchronize()
-                    elapsed = time.perf_counter() - begin
-                return done_items / elapsed
-
-    env_rate = rate(env_step, seconds)
-    while len(replay) < batch_size:
-        env_step()
-    update_rate = rate(update, seconds)
-    return {
-        "variant": variant,
-        "feature_dim": features_of.feature_dim,
-        "num_envs": num_envs,
-        "batch_size": batch_size,
-        "env_steps_per_s": env_rate,
-        "updates_per_s": update_rate,
     }

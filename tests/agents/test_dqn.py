@@ -16,7 +16,6 @@ from pipeline.agents.dqn import (
     AgentParams,
     DQNLearner,
     agent_from_result,
-    bench_train,
     double_dqn_targets,
     episodes_to_solve,
     evaluate_agent,
@@ -472,10 +471,3 @@ def test_load_agent_errors(tmp_path: Path) -> None:
     with pytest.raises(AgentFileError) as error:
         load_agent(vae_file)
     assert str(error.value) == f"{vae_file}: not a socnav-wm agent file"
-
-
-def test_bench_train_reports_both_rates() -> None:
-    params = AgentParams(num_envs=8, batch_size=16)
-    row = bench_train("2stepahead-maspm", params=params, seconds=0.05)
-    assert (row["feature_dim"], row["num_envs"], row["batch_size"]) == (80, 8, 16)
-    assert row["env_steps_per_s"] > 0 and row["updates_per_s"] > 0

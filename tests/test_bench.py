@@ -1,0 +1,14 @@
+"""The training benchmark's rows (the simulator and collection benchmarks run through the CLI
+in tests/test_cli.py)."""
+
+from __future__ import annotations
+
+from pipeline.agents.params import AgentParams
+from pipeline.bench import bench_train
+
+
+def test_bench_train_reports_both_rates() -> None:
+    params = AgentParams(num_envs=8, batch_size=16)
+    row = bench_train("2stepahead-maspm", params=params, seconds=0.05)
+    assert (row["feature_dim"], row["num_envs"], row["batch_size"]) == (80, 8, 16)
+    assert row["env_steps_per_s"] > 0 and row["updates_per_s"] > 0
