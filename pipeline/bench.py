@@ -207,7 +207,7 @@ def bench_train(
     """
     import torch
 
-    from pipeline.agents.dqn import DQNLearner, variant_for
+    from pipeline.agents.dqn import DQNLearner, step_and_restart, variant_for
     from pipeline.agents.features import VARIANTS
     from pipeline.agents.params import AgentParams, check_variant
     from pipeline.agents.replay import ReplayBuffer
@@ -243,17 +243,12 @@ def bench_train(
 
     def env_step() -> int:
         actions = learner.act(state["features"], 0.5, rng)
-        result = sim.step(actions)
-        done = result.terminated | result.truncated
-        reset_obs = None
-        if done.any():
-            sim.reset_envs(done)
-            reset_obs = sim.observation[done]
-        next_features, new_features = features_of.step(result.obs, actions, done, reset_obs)
+        step = step_and_restart(sim, features_of, actions)
         replay.add(
-            state["features"], actions, result.reward, next_features, result.terminated, p.gamma
-        )
-        state["features"] = new_features
+            state["features"], actions, step.result.reward, step.next_features,
+            step.result.terminated, p.gamma,
+        )  # fmt: skip
+        state["features"] = step.features
         return num_envs
 
     def update() -> int:

@@ -39,7 +39,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -49,7 +49,7 @@ from pipeline.agents.dueling import DuelingQNetwork
 from pipeline.agents.features import VARIANTS, Variant, make_variant
 from pipeline.agents.params import AgentParams, check_variant
 from pipeline.agents.replay import Batch, NStepAccumulator, ReplayBuffer
-from pipeline.env.core import NUM_ACTIONS, Simulator
+from pipeline.env.core import NUM_ACTIONS, Simulator, StepResult
 from pipeline.env.params import EnvParams
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_NAMES, COLLISION_WALL, BatchState
 from pipeline.io import atomic_path, first_line, load_saved
@@ -377,6 +377,34 @@ def load_world_model(
     return load_vae(vae_path, device), load_lstm(lstm_path, device)
 
 
+class VectorStep(NamedTuple):
+    """One step of every environment, finished episodes restarted (:func:`step_and_restart`)."""
+
+    result: StepResult
+    done: np.ndarray  # (N,) bool: the episode ended (terminated or truncated)
+    finished_scenarios: np.ndarray  # scenario ids of the episodes that ended, in env order
+    first_obs: np.ndarray | None  # (k, obs_dim) the new episodes' first observations (or None)
+    next_features: torch.Tensor  # (N, feature_dim) features of result.obs (the replay's s′)
+    features: torch.Tensor  # (N, feature_dim) features to act on next (new episodes' t = 0)
+
+
+def step_and_restart(sim: Simulator, features_of: Variant, actions: np.ndarray) -> VectorStep:
+    """Step ``sim`` with ``actions``, start a new episode in every env whose episode ended, and
+    advance the variant's world-model state over both (what the training loop and
+    ``socnav-wm bench train`` do each vector step)."""
+    result = sim.step(actions)
+    done = result.terminated | result.truncated
+    finished_scenarios = sim.state.scenario_id[done].copy()
+    reset_obs = None
+    if done.any():
+        sim.reset_envs(done)
+        reset_obs = sim.observation[done]
+    next_features, features = features_of.step(
+        result.obs, actions, reset_mask=done, reset_obs=reset_obs
+    )
+    return VectorStep(result, done, finished_scenarios, reset_obs, next_features, features)
+
+
 def _seed_everything(seed: int) -> None:
     # cleanrl's seeding block. The loop itself draws only from explicit numpy Generators (the
     # project never uses numpy's legacy global generator); torch's global generator seeds the
@@ -607,15 +635,8 @@ def train_agent(
         while len(rows) < p.episodes:
             # -- act and step ----------------------------------------------------------------
             actions = learner.act(features, epsilon, explore_rng)
-            result = sim.step(actions)
-            done = result.terminated | result.truncated
-            reset_obs = None
-            if done.any():
-                scenario_ids = sim.state.scenario_id[done].copy()
-                sim.reset_envs(done)
-                reset_obs = sim.observation[done]
-            next_features, new_features = features_of.step(
-                result.obs, actions, reset_mask=done, reset_obs=reset_obs
+            result, done, scenario_ids, first_obs, next_features, new_features = step_and_restart(
+                sim, features_of, actions
             )
 
             # -- store -----------------------------------------------------------------------
@@ -627,8 +648,8 @@ def train_agent(
             )
             features = new_features
             goal_distance = next_distance
-            if reset_obs is not None:
-                goal_distance[done] = goal_distances(reset_obs)
+            if first_obs is not None:
+                goal_distance[done] = goal_distances(first_obs)
             env_steps += p.num_envs
             episode_return += result.reward
             episode_length += 1
