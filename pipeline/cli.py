@@ -722,7 +722,8 @@ def bench_train_command(
     _print_table(
         rows,
         f"socnav-wm bench train ({params_path}, {resolve_device(agent.device)}, "
-        f"{torch.get_num_threads()} torch threads, preset {agent.preset}, "
+        f"{torch.get_num_threads()} torch threads, {agent.update_backend} update, "
+        f"preset {agent.preset}, "
         f"decode_latents {agent.resolved(names[0]).decode_latents}, "
         f"{seconds:g} s per rate)",
         {

@@ -165,6 +165,11 @@ class DQNLearner:
     """
 
     def __init__(self, feature_dim: int, params: AgentParams, device: torch.device) -> None:
+        if params.update_backend == "native" and device.type != "cpu":
+            raise ValueError(
+                f"agent.update_backend: native runs on the CPU, got device {device.type} "
+                "(set agent.device: cpu, or update_backend: torch)"
+            )
         self.params = params
         self.device = device
         self.q_network = DuelingQNetwork(
@@ -188,6 +193,11 @@ class DQNLearner:
             # The fused kernel does Adam's element-wise algebra in one pass over the buffer.
             fused=device.type in ("cpu", "cuda"),
         )
+        self._native = None
+        if params.update_backend == "native":
+            from pipeline.agents.native import NativeUpdate
+
+            self._native = NativeUpdate(self)
 
     @torch.no_grad()
     def act(self, features: torch.Tensor, epsilon: float, rng: np.random.Generator) -> np.ndarray:
@@ -212,7 +222,12 @@ class DQNLearner:
         the batch (each example's row is computed on its own, so the Q-values are those of two
         passes; ``tests/agents/test_dqn.py`` checks the whole update against the textbook one),
         and the backward pass uses the ``s`` half of its activations.
+
+        With ``update_backend: native`` the same update is one call of a compiled kernel
+        (:class:`pipeline.agents.native.NativeUpdate`).
         """
+        if self._native is not None:
+            return self._native(batch)
         p = self.params
         n = batch.features.shape[0]
         q_both, cache = self.q_network.forward_cached(

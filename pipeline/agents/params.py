@@ -49,6 +49,8 @@ DeviceName = Literal["auto", "cpu", "cuda"]
 PRESETS: tuple[str, ...] = ("shared", "paper")
 OPTIMIZERS: tuple[str, ...] = ("adam", "adamw")
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
+UpdateBackend = Literal["torch", "native"]
+UPDATE_BACKENDS: tuple[str, ...] = ("torch", "native")
 
 
 @dataclass(frozen=True)
@@ -145,6 +147,11 @@ class AgentParams:
     """Selection scenarios of each of those greedy runs."""
     device: DeviceName = "auto"
     """`auto` uses CUDA when available, else the CPU."""
+    update_backend: UpdateBackend = "torch"
+    """How a gradient update is computed: `torch` (PyTorch operations, any device) or `native`
+    (one call of a compiled C kernel, CPU only, about twice as fast at batch 64: README
+    "Speed"). The two round differently, so a training changes with the backend; the shipped
+    runs use `torch`."""
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -163,6 +170,7 @@ class AgentParams:
             ("preset", PRESETS),
             ("optimizer", OPTIMIZERS),
             ("device", DEVICES),
+            ("update_backend", UPDATE_BACKENDS),
         ):
             if getattr(self, name) not in choices:
                 raise ValueError(
