@@ -9,7 +9,7 @@ agent files are those of the PyTorch update; the rounding is not, so a training 
 backend.
 
 The C file is compiled on first use with the system's C compiler (``$CC``, else ``cc``) into
-``$XDG_CACHE_HOME/socnav-wm`` (``~/.cache/socnav-wm``), under a name that hashes the source, the
+:func:`cache_dir` (``~/.cache/socnav-wm`` by default), under a name that hashes the source, the
 flags, the compiler, PyTorch and the CPU, and written atomically. Its matrix products are the
 ``sgemm_`` of the MKL inside PyTorch's CPU library (x86-64 builds of PyTorch).
 """
@@ -42,7 +42,7 @@ PARTS = 2
 MAX_TRUNK_LAYERS = 64
 
 
-class NativeUpdateError(RuntimeError):
+class NativeUpdateError(ValueError):
     """The native update cannot be built or used here (the message says why)."""
 
 
@@ -62,6 +62,9 @@ def _cpu_signature() -> str:
 
 
 def cache_dir() -> Path:
+    """Where builds go: ``$SOCNAV_WM_CACHE_DIR``, else ``$XDG_CACHE_HOME/socnav-wm``."""
+    if os.environ.get("SOCNAV_WM_CACHE_DIR"):
+        return Path(os.environ["SOCNAV_WM_CACHE_DIR"])
     root = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(root) / "socnav-wm"
 

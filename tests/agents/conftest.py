@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -10,6 +14,11 @@ import torch
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.training import save_lstm, save_vae
 from pipeline.worldmodel.vae import VAE
+
+# The native update (test_native.py) compiles into a cache folder: the tests' own, not the user's.
+if not os.environ.get("SOCNAV_WM_CACHE_DIR"):
+    os.environ["SOCNAV_WM_CACHE_DIR"] = tempfile.mkdtemp(prefix="socnav-wm-tests-")
+    atexit.register(shutil.rmtree, os.environ["SOCNAV_WM_CACHE_DIR"], ignore_errors=True)
 
 OBS_DIM = 23
 LATENT = 6

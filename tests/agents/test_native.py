@@ -7,12 +7,14 @@ from pathlib import Path
 
 import pytest
 import torch
+from typer.testing import CliRunner
 
 from pipeline.agents import native
 from pipeline.agents.dqn import DQNLearner, train_agent
 from pipeline.agents.params import AgentParams
 from pipeline.agents.replay import Batch
 from pipeline.bench import bench_train
+from pipeline.cli import app
 from tests.agents.test_dqn import TINY, TINY_ENV, Interrupted, assert_same_weights, without_time
 
 
@@ -164,7 +166,7 @@ def test_native_update_refuses_a_gpu_device() -> None:
 def test_native_build_errors_are_one_line(
     compiler: str, message: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # nothing built there yet
+    monkeypatch.setenv("SOCNAV_WM_CACHE_DIR", str(tmp_path))  # nothing built there yet
     monkeypatch.setenv("CC", compiler)
     native.load_library.cache_clear()
     try:
@@ -174,3 +176,22 @@ def test_native_build_errors_are_one_line(
         native.load_library.cache_clear()
     assert "\n" not in str(caught.value)
     assert not list(tmp_path.rglob("*.so"))  # no half-written library left behind
+
+
+def test_cli_reports_a_failed_build_in_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SOCNAV_WM_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("CC", "false")
+    native.load_library.cache_clear()
+    params = tmp_path / "params.yaml"
+    params.write_text("agent:\n  num_envs: 4\n  batch_size: 8\n  update_backend: native\n")
+    try:
+        result = CliRunner().invoke(
+            app, ["bench", "train", "--variant", "dueling-dqn", "--params", str(params)]
+        )
+    finally:
+        native.load_library.cache_clear()
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: agent.update_backend: native: compiling")
+    assert len(result.output.strip().splitlines()) == 1
