@@ -40,6 +40,7 @@ PARTS = 2
 """native_update.c's PARTS: every phase of the update is cut into this many parts, one thread each
 (so at most this many threads are used, and the result does not depend on how many are)."""
 MAX_TRUNK_LAYERS = 64
+"""native_update.c's MAX_LAYERS."""
 
 
 class NativeUpdateError(ValueError):

@@ -30,8 +30,9 @@ extern void sgemm_(const char *transa, const char *transb, const int *m, const i
                    const int *k, const float *alpha, const float *a, const int *lda,
                    const float *b, const int *ldb, const float *beta, float *c, const int *ldc);
 
-#define SLOPE 0.01f /* LeakyReLU negative slope (dueling.py LEAKY_SLOPE) */
-#define PARTS 2       /* parts of every phase; at most PARTS threads are used */
+#define SLOPE 0.01f  /* LeakyReLU negative slope (dueling.py LEAKY_SLOPE) */
+#define PARTS 2      /* parts of every phase; at most PARTS threads are used */
+#define MAX_LAYERS 64 /* trunk layers (native.py MAX_TRUNK_LAYERS) */
 
 /* Row-major C (m x n) = op(A) (m x k) . op(B) (k x n) + beta C; ta/tb: use the transpose of A/B
  * as stored. Column-major sgemm computes C^T = op(B)^T op(A)^T. */
@@ -98,7 +99,8 @@ double native_update(int nt, const long *lay, int batch, float *w, float *tw, fl
     float *p = ws;
     float *X = p;
     p += B2 * D;
-    float *pre[64], *act[64], *tpre[64], *tact[64], *dpre[64];
+    float *pre[MAX_LAYERS], *act[MAX_LAYERS], *tpre[MAX_LAYERS], *tact[MAX_LAYERS];
+    float *dpre[MAX_LAYERS];
     for (long l = 0; l < L; l++) {
         long o = TRUNK(l, 3);
         pre[l] = p, p += B2 * o, act[l] = p, p += B2 * o;

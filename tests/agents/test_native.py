@@ -156,6 +156,13 @@ def test_native_update_refuses_a_gpu_device() -> None:
         DQNLearner(5, NATIVE, torch.device("cuda"))
 
 
+@needs_native
+def test_native_update_refuses_a_trunk_deeper_than_it_holds() -> None:
+    deep = dataclasses.replace(NATIVE, trunk_sizes=(4,) * (native.MAX_TRUNK_LAYERS + 1))
+    with pytest.raises(native.NativeUpdateError, match=r"^agent.trunk_sizes: .* at most 64"):
+        DQNLearner(5, deep, torch.device("cpu"))
+
+
 @pytest.mark.parametrize(
     ("compiler", "message"),
     [
