@@ -189,6 +189,11 @@ class NativeUpdate:
     def __call__(self, batch: Batch) -> torch.Tensor:
         """One update on ``batch``; returns the loss (before the step), as the PyTorch update."""
         learner = self.learner
+        if batch.actions.dtype != torch.int64 or batch.features.dtype != torch.float32:
+            raise NativeUpdateError(
+                "the native update takes float32 features and int64 actions, got "
+                f"{batch.features.dtype} and {batch.actions.dtype}"
+            )
         n = batch.features.shape[0]
         need = self.lib.native_workspace(self.layout.ctypes.data, n)
         if self.workspace.numel() < need:

@@ -157,6 +157,14 @@ def test_native_update_refuses_a_gpu_device() -> None:
 
 
 @needs_native
+def test_native_update_refuses_other_dtypes() -> None:
+    learner = DQNLearner(5, NATIVE, torch.device("cpu"))
+    batch = random_batch(16, 5)._replace(actions=torch.zeros(16, dtype=torch.int32))
+    with pytest.raises(native.NativeUpdateError, match="int64 actions, got torch.float32"):
+        learner.update(batch)
+
+
+@needs_native
 def test_native_update_refuses_a_trunk_deeper_than_it_holds() -> None:
     deep = dataclasses.replace(NATIVE, trunk_sizes=(4,) * (native.MAX_TRUNK_LAYERS + 1))
     with pytest.raises(native.NativeUpdateError, match=r"^agent.trunk_sizes: .* at most 64"):
