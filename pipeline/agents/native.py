@@ -171,6 +171,7 @@ class NativeUpdate:
         self.partials = np.zeros(2 * PARTS, dtype=np.float64)
         self.norm = np.zeros(1, dtype=np.float32)
         self.workspace = torch.empty(0)
+        self.workspace_rows = 0  # the largest batch the workspace holds
         self._state()  # the optimiser's state, created as torch's fused Adam creates it
 
     def _state(self) -> dict[str, torch.Tensor]:
@@ -195,9 +196,9 @@ class NativeUpdate:
                 f"{batch.features.dtype} and {batch.actions.dtype}"
             )
         n = batch.features.shape[0]
-        need = self.lib.native_workspace(self.layout.ctypes.data, n)
-        if self.workspace.numel() < need:
-            self.workspace = torch.empty(need)
+        if n > self.workspace_rows:  # the workspace grows with the batch; sized once per size
+            self.workspace = torch.empty(self.lib.native_workspace(self.layout.ctypes.data, n))
+            self.workspace_rows = n
         threads = min(torch.get_num_threads(), PARTS)
         state = self._state()
         state["step"] += 1
