@@ -30,6 +30,8 @@ from pipeline.env.state import COLLISION_HUMAN, COLLISION_NONE, COLLISION_WALL, 
 
 ACTION_NAMES = ("stop", "forward", "rotate-left", "rotate-right")
 NUM_ACTIONS = len(ACTION_NAMES)
+# Scenario ids are int64 in the kernels, and later resets count up from the largest one used.
+MAX_SCENARIO_ID = 2**62
 
 
 def discrete_commands(params: EnvParams) -> np.ndarray:
@@ -150,7 +152,6 @@ class Simulator:
         self._policy_mode = (
             -1 if self.params.human_policy == "mixed" else POLICY_CODES[self.params.human_policy]
         )
-        self._min_goal_distance = max(self.params.min_goal_distance, self.params.success_distance)
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -160,7 +161,9 @@ class Simulator:
         if seed is not None:
             if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
                 raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
-            self.seed = int(seed)
+            # The counter-based generator keys on the seed's 64 bits (np.uint64(seed)): larger
+            # seeds are reduced modulo 2**64, so seeds below 2**64 keep their scenarios.
+            self.seed = int(seed) % 2**64
         if scenario_ids is None:
             scenario_ids = np.arange(self.num_envs)
         self.next_scenario = 0
@@ -182,25 +185,33 @@ class Simulator:
 
     def _reset_slots(self, envs: np.ndarray, scenario_ids: np.ndarray) -> None:
         envs = np.ascontiguousarray(envs, dtype=np.int64)
-        ids = np.ascontiguousarray(scenario_ids, dtype=np.int64)
+        ids = np.asarray(scenario_ids)
+        if (
+            ids.dtype.kind not in "iu"
+            or ids.size
+            and not (ids.min() >= 0 and ids.max() < MAX_SCENARIO_ID)
+        ):
+            raise ValueError("scenario_ids: expected integers in 0..2**62 - 1")
+        ids = np.ascontiguousarray(ids, dtype=np.int64)
         if ids.shape != envs.shape:
             raise ValueError(
                 f"scenario_ids: expected {envs.size} ids (one per env), got shape {ids.shape}"
             )
-        if ids.size and ids.min() < 0:
-            raise ValueError("scenario_ids: must be non-negative")
         p = self.params
         s = self.state
         failures = spawn(
             envs,
-            self.seed,
+            self._kernel_seed,
             ids,
             self._policy_mode,
             p.spawn_half_size,
+            p.wall_half_size,
             p.robot_radius,
             p.human_radius,
             p.human_max_speed,
-            self._min_goal_distance,
+            p.goal_radius,
+            p.human_goal_radius,
+            p.min_goal_distance,
             s.robot_xy,
             s.robot_theta,
             s.goal_xy,
@@ -213,7 +224,8 @@ class Simulator:
         )
         if failures:
             raise RuntimeError(
-                f"could not place {p.num_humans} humans in a {p.room_size} m room; "
+                f"could not place {p.num_humans} humans and the goals in a {p.room_size} m room "
+                f"without overlaps ({failures} discs ran out of spawn attempts); "
                 "reduce env.num_humans or enlarge env.room_size"
             )
         s.scenario_id[envs] = ids
@@ -273,8 +285,8 @@ class Simulator:
         s = self.state
         active = ~s.done
         _advance_robot(active, v, omega, s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, p.dt)
-        velocity = self._humans.velocities(self.seed, s)
-        self._humans.move(self.seed, s, velocity, active)
+        velocity = self._humans.velocities(self._kernel_seed, s)
+        self._humans.move(self._kernel_seed, s, velocity, active)
         _outcomes(
             active,
             s.robot_xy,
@@ -347,6 +359,11 @@ class Simulator:
             "scenario_id": s.scenario_id.copy(),
             "step": s.step_count.copy(),
         }
+
+    @property
+    def _kernel_seed(self) -> int:
+        """The seed as the kernels' int64: same 64 bits, so np.uint64(seed) there is unchanged."""
+        return self.seed - 2**64 if self.seed >= 2**63 else self.seed
 
     @property
     def observation(self) -> np.ndarray:

@@ -20,7 +20,7 @@ from pipeline.env.scenario import (
     POLICY_ORCA,
     POLICY_SFM,
     STREAM_AVOID_ROBOT,
-    draw_human_goal,
+    redraw_human_goal,
     uniform,
 )
 from pipeline.env.state import BatchState
@@ -149,23 +149,30 @@ def move_humans(
     human_speed: np.ndarray,
     human_goal: np.ndarray,
     human_goal_index: np.ndarray,
+    robot_xy: np.ndarray,
+    goal_xy: np.ndarray,
     speed_threshold: float,
     wall_half: float,
     spawn_half: float,
     human_radius: float,
-    goal_reached_distance: float,
+    robot_radius: float,
+    human_goal_radius: float,
+    robot_goal_radius: float,
     dt: float,
 ) -> None:
     """Move every human of the ``active`` envs along ``velocity`` (N, H, 2) for one step.
 
     As in the paper's environment: speeds below ``speed_threshold`` become 0 and the heading
     follows the velocity (a zero velocity keeps the old heading). Humans are kept inside the
-    walls (a wall is a hard boundary for the dynamics, not just a force). A human within
-    ``goal_reached_distance`` of its goal draws its next goal, keyed by the goal's index so the
-    draw does not depend on when it happens.
+    walls (a wall is a hard boundary for the dynamics, not just a force). Once all have moved,
+    each human (in order) within ``human_radius + human_goal_radius`` of its goal draws its next
+    goal, keyed by the goal's index so the draw does not depend on when it happens, and redrawn
+    while it touches a wall, the robot (``robot_xy``, its current position), a human, a human
+    goal or the robot goal ``goal_xy`` (``scenario.redraw_human_goal``).
     """
     num_envs, num_humans = human_speed.shape
     limit = wall_half - human_radius
+    reach = human_radius + human_goal_radius
     for e in range(num_envs):
         if not active[e]:
             continue
@@ -181,17 +188,18 @@ def move_humans(
             human_speed[e, i] = speed
             x = human_xy[e, i, 0] + speed * dt * human_heading[e, i, 0]
             y = human_xy[e, i, 1] + speed * dt * human_heading[e, i, 1]
-            x = min(limit, max(-limit, x))
-            y = min(limit, max(-limit, y))
-            human_xy[e, i, 0] = x
-            human_xy[e, i, 1] = y
-            if norm(human_goal[e, i, 0] - x, human_goal[e, i, 1] - y) < (goal_reached_distance):
+            human_xy[e, i, 0] = min(limit, max(-limit, x))
+            human_xy[e, i, 1] = min(limit, max(-limit, y))
+        for i in range(num_humans):
+            x = human_xy[e, i, 0]
+            y = human_xy[e, i, 1]
+            if norm(human_goal[e, i, 0] - x, human_goal[e, i, 1] - y) < reach:
                 human_goal_index[e, i] += 1
-                gx, gy = draw_human_goal(
-                    seed, scenario_id[e], i, human_goal_index[e, i], spawn_half
-                )
-                human_goal[e, i, 0] = gx
-                human_goal[e, i, 1] = gy
+                redraw_human_goal(
+                    seed, scenario_id[e], e, i, human_goal_index[e, i], spawn_half,
+                    human_goal_radius, wall_half, robot_xy, robot_radius, human_xy, human_radius,
+                    human_goal, goal_xy, robot_goal_radius,
+                )  # fmt: skip
 
 
 class HumanDynamics:
@@ -251,6 +259,13 @@ class HumanDynamics:
             orca_v = self._orca(state)
             is_orca = (policies == POLICY_ORCA)[..., None]
             np.copyto(velocity, orca_v, where=is_orca)
+        # A human moves speed·dt along its velocity, so this caps every displacement at
+        # human_max_speed·dt. SFM clips its own velocity and ORCA's linear program keeps it in
+        # the same circle; this final clip catches whatever gets past them (a no-op otherwise).
+        speed = np.linalg.norm(velocity, axis=-1, keepdims=True)
+        np.multiply(
+            velocity, p.human_max_speed / np.maximum(speed, p.human_max_speed), out=velocity
+        )
         return velocity
 
     def _orca(self, state: BatchState) -> np.ndarray:
@@ -297,10 +312,14 @@ class HumanDynamics:
             state.human_speed,
             state.human_goal,
             state.human_goal_index,
+            state.robot_xy,
+            state.goal_xy,
             p.human_speed_threshold,
             p.wall_half_size,
             p.spawn_half_size,
             p.human_radius,
-            p.human_radius + p.human_goal_radius,
+            p.robot_radius,
+            p.human_goal_radius,
+            p.goal_radius,
             p.dt,
         )

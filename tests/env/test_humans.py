@@ -68,8 +68,20 @@ def test_a_human_at_its_goal_draws_the_next_goal_of_its_sequence() -> None:
     sim.step(np.array([STOP]))
     s = sim.state
     assert s.human_goal_index[0, 0] == 1
-    expected = draw_human_goal(sim.seed, int(s.scenario_id[0]), 0, 1, sim.params.spawn_half_size)
-    np.testing.assert_array_equal(s.human_goal[0, 0], expected)
+    p = sim.params
+    old_goal = np.array([1.05, 1.0])
+    for attempt in range(100):  # the first attempt whose disc touches nothing
+        g = np.array(draw_human_goal(sim.seed, int(s.scenario_id[0]), 0, 1, attempt, 4.5))
+        free = (
+            np.abs(g).max() + p.human_goal_radius < p.wall_half_size
+            and np.linalg.norm(g - s.robot_xy[0]) > p.robot_radius + p.human_goal_radius
+            and np.linalg.norm(g - s.human_xy[0, 0]) > p.human_radius + p.human_goal_radius
+            and np.linalg.norm(g - old_goal) > 2 * p.human_goal_radius
+            and np.linalg.norm(g - s.goal_xy[0]) > p.goal_radius + p.human_goal_radius
+        )
+        if free:
+            break
+    np.testing.assert_array_equal(s.human_goal[0, 0], g)
 
 
 def test_speeds_below_the_threshold_stop_the_human() -> None:
@@ -79,7 +91,8 @@ def test_speeds_below_the_threshold_stop_the_human() -> None:
     goal = np.array([[[3.0, 0.0]]])
     move_humans(
         0, np.array([0]), np.array([True]), np.array([[[0.0, 0.04]]]), xy, heading, speed, goal,
-        np.zeros((1, 1), dtype=np.int64), 0.05, 4.8, 4.5, 0.36, 0.61, 1.0,
+        np.zeros((1, 1), dtype=np.int64), np.array([[-4.0, -4.0]]), np.array([[4.0, 4.0]]),
+        0.05, 4.8, 4.5, 0.36, 0.3, 0.25, 0.5, 1.0,
     )  # fmt: skip
     assert speed[0, 0] == 0.0
     np.testing.assert_array_equal(xy[0, 0], [0.0, 0.0])
@@ -113,3 +126,32 @@ def test_random_episodes_keep_every_invariant(
         np.testing.assert_allclose(np.linalg.norm(s.human_heading, axis=-1), 1.0, atol=1e-9)
         assert np.all(np.abs(s.robot_theta) <= np.pi)
         sim.reset_envs(result.terminated | result.truncated)
+
+
+def test_no_human_moves_more_than_max_speed_dt_over_1000_random_episodes() -> None:
+    params = EnvParams(human_policy="mixed")
+    sim = Simulator(1000, params)
+    sim.reset(seed=0)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    while not sim.state.done.all():
+        active = ~sim.state.done
+        before = sim.state.human_xy.copy()
+        sim.step(rng.integers(0, 4, size=1000))
+        step = np.linalg.norm(sim.state.human_xy - before, axis=-1)[active]
+        worst = max(worst, float(step.max()))
+    assert worst <= params.human_max_speed * params.dt + 1e-9
+
+
+def test_velocities_are_capped_at_max_speed_whatever_the_policy_returns(monkeypatch) -> None:
+    from pipeline.env import humans
+
+    params = EnvParams(human_policy="orca")
+    sim = Simulator(1, params)
+    sim.reset(seed=0)
+    too_fast = np.full((1, params.num_humans, 2), 0.2)
+    monkeypatch.setattr(humans.HumanDynamics, "_orca", lambda self, state: too_fast)
+    before = sim.state.human_xy.copy()
+    sim.step(np.array([0]))
+    step = np.linalg.norm(sim.state.human_xy - before, axis=-1)
+    assert step.max() <= params.human_max_speed * params.dt + 1e-9
