@@ -15,7 +15,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from pipeline.env.core import NUM_ACTIONS, Simulator, StepResult
+from pipeline.env.core import MAX_SCENARIO_ID, NUM_ACTIONS, Simulator, StepResult
 from pipeline.env.params import EnvParams
 from pipeline.env.state import COLLISION_NAMES
 
@@ -41,7 +41,13 @@ def _spaces(params: EnvParams, action_type: str) -> tuple[spaces.Box, spaces.Spa
 
 def _as_sim_actions(action: Any, action_type: str, num_envs: int) -> np.ndarray:
     if action_type == "discrete":
-        return np.asarray(action, dtype=np.int64).reshape(num_envs)
+        # Integers only (Python or numpy): casting would run 1.5 or True as action 1, and a huge
+        # Python int would overflow int64.
+        a = np.asarray(action)
+        if a.dtype.kind not in "iu" or a.size and (a.min() < 0 or a.max() >= NUM_ACTIONS):
+            shown = " ".join(repr(action).split())[:60]
+            raise ValueError(f"action: expected integers in 0..{NUM_ACTIONS - 1}, got {shown}")
+        return a.astype(np.int64).reshape(num_envs)
     return np.asarray(action, dtype=np.float64).reshape(num_envs, 2)
 
 
@@ -72,6 +78,7 @@ class SocNavEnv(gym.Env[np.ndarray, Any]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        _check_seed(seed)
         super().reset(seed=seed)
         options = dict(options or {})
         scenario = options.pop("scenario_id", None)
@@ -111,10 +118,22 @@ class SocNavEnv(gym.Env[np.ndarray, Any]):
         return render_frame(scene_of(self.sim, 0, np.array(self._trail)))
 
 
+def _check_seed(seed: Any) -> None:
+    """Any non-negative integer (gymnasium's rule); the simulator reduces it to 64 bits."""
+    if seed is not None and (
+        isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0
+    ):
+        raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
+
+
 def _one_id(scenario: Any, default: int) -> np.ndarray:
     value = default if scenario is None else scenario
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-        raise ValueError(f"scenario_id: expected a non-negative integer, got {value!r}")
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or not 0 <= value < MAX_SCENARIO_ID
+    ):
+        raise ValueError(f"scenario_id: expected an integer in 0..2**62 - 1, got {value!r}")
     return np.array([int(value)])
 
 
@@ -168,9 +187,17 @@ class SocNavVectorEnv(VectorEnv):
         num_envs: int = 1,
         render_mode: str | None = None,
         action_type: str = "discrete",
+        max_episode_steps: int | None = None,
         **env_options: Any,
     ) -> None:
         self.params = EnvParams.from_dict(env_options)
+        # gym.make_vec passes the spec's max_episode_steps; the env truncates itself at
+        # params.max_steps, so it only has to agree.
+        if max_episode_steps is not None and max_episode_steps != self.params.max_steps:
+            raise ValueError(
+                f"max_episode_steps: the env truncates at max_steps={self.params.max_steps}, "
+                f"got {max_episode_steps!r} (pass max_steps instead)"
+            )
         self.sim = Simulator(num_envs, self.params)
         self.num_envs = self.sim.num_envs
         self.action_type = action_type
@@ -184,6 +211,7 @@ class SocNavVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         if isinstance(seed, list | tuple):
             raise ValueError("seed: the batched env takes one seed for the whole batch")
+        _check_seed(seed)
         super().reset(seed=seed)
         options = dict(options or {})
         ids = options.pop("scenario_ids", None)
@@ -221,11 +249,18 @@ class SocNavVectorEnv(VectorEnv):
 
 
 def register() -> None:
-    """Register ``SocNav-v0`` (idempotent; done on ``import pipeline.env``)."""
+    """Register ``SocNav-v0`` (idempotent).
+
+    Done on ``import pipeline.env`` and by gymnasium itself at import, through the
+    ``gymnasium.envs`` entry point in pyproject.toml. ``max_episode_steps`` is the env's own
+    ``max_steps``: ``gym.make`` adds a ``TimeLimit`` that fires on the same step as the env's
+    truncation (pass ``max_episode_steps`` along with a non-default ``max_steps``).
+    """
     if ENV_ID in gym.registry:
         return
     gym.register(
         id=ENV_ID,
         entry_point="pipeline.env.gym:SocNavEnv",
         vector_entry_point="pipeline.env.gym:SocNavVectorEnv",
+        max_episode_steps=EnvParams().max_steps,
     )

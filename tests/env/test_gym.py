@@ -113,3 +113,84 @@ def test_render_returns_an_rgb_frame() -> None:
     env.step(1)
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.shape[2] == 3
+
+
+@pytest.mark.parametrize("action", [1.5, True, np.float64(1.0), np.bool_(True), 4, -1, 2**70])
+def test_single_env_refuses_non_integer_or_out_of_range_actions(action) -> None:
+    env = SocNavEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action: expected integers in 0\.\.3"):
+        env.step(action)
+
+
+def test_single_env_accepts_python_and_numpy_integers() -> None:
+    env = SocNavEnv()
+    env.reset(seed=0)
+    for action in (1, np.int64(2), np.uint8(3), np.int32(0)):
+        env.step(action)
+
+
+@pytest.mark.parametrize(
+    "actions",
+    [np.ones(4, dtype=bool), np.ones(4) * 1.5, np.array([0, 1, 2, 4]), np.array([0, -1, 1, 2])],
+)
+def test_vector_env_refuses_non_integer_or_out_of_range_actions(actions) -> None:
+    envs = SocNavVectorEnv(num_envs=4)
+    envs.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action: expected integers in 0\.\.3"):
+        envs.step(actions)
+
+
+def test_huge_seeds_are_reduced_and_in_range_seeds_unchanged() -> None:
+    env = SocNavEnv()
+    small, _ = env.reset(seed=7)
+    from pipeline.env import Simulator
+
+    sim = Simulator(1)
+    np.testing.assert_array_equal(sim.reset(seed=7)[0][0], small)
+    a, _ = env.reset(seed=2**63)
+    b, _ = env.reset(seed=2**63 + 2**64)
+    np.testing.assert_array_equal(a, b)
+    env.reset(seed=2**64)
+    env.reset(seed=2**70)
+    env.step(env.action_space.sample())
+    envs = SocNavVectorEnv(num_envs=2)
+    envs.reset(seed=2**64 - 1)
+    envs.step(np.array([1, 1]))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"seed": -1}, "seed: expected a non-negative integer"),
+        ({"options": {"scenario_id": 2**70}}, "scenario_id: expected an integer in"),
+        ({"options": {"scenario_id": 2**62}}, "scenario_id: expected an integer in"),
+    ],
+)
+def test_bad_seeds_and_scenario_ids_are_one_line_value_errors(kwargs, message) -> None:
+    env = SocNavEnv()
+    with pytest.raises(ValueError, match=message) as info:
+        env.reset(**kwargs)
+    assert "\n" not in str(info.value)
+
+
+def test_vector_env_refuses_huge_scenario_ids() -> None:
+    envs = SocNavVectorEnv(num_envs=1)
+    with pytest.raises(ValueError, match="scenario_ids: expected integers in"):
+        envs.reset(seed=0, options={"scenario_ids": np.array([2**70])})
+    with pytest.raises(ValueError, match="seed: expected a non-negative integer"):
+        envs.reset(seed=-3)
+
+
+def test_spec_shows_the_step_limit_and_the_episode_truncates_once_at_201() -> None:
+    env = gym.make("SocNav-v0", num_humans=0)
+    assert env.spec.max_episode_steps == 201
+    env.reset(seed=0)
+    ends = []
+    for step in range(1, 202):
+        _, _, terminated, truncated, _ = env.step(0)  # stop: the robot never leaves its spot
+        if terminated or truncated:
+            ends.append((step, terminated, truncated))
+    assert ends == [(201, False, True)]
+    envs = gym.make_vec("SocNav-v0", num_envs=2)
+    assert envs.unwrapped.params.max_steps == 201
