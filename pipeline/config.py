@@ -1,31 +1,37 @@
 """Typed, validated configuration: ``params.yaml`` is the single source of every stage's settings.
 
-One pydantic model per section (``collect``, ``vae``, ``lstm``; ``env`` is the simulator's own
-:class:`~pipeline.env.params.EnvParams` dataclass) under the top-level :class:`Params`. Every
-section has defaults, so a partial ``params.yaml`` works and the shipped file only lists what a
-reader should see. Attribute docstrings become the fields' descriptions (the documentation).
+One strict pydantic model per section, all subclasses of :class:`~pipeline.env.params.Section`
+(``env`` is the simulator's :class:`~pipeline.env.params.EnvParams`, ``agent`` the agents'
+:class:`~pipeline.agents.params.AgentParams`, ``baselines.orca`` / ``baselines.sfm`` the
+baselines' own parameter models), under the top-level :class:`Params`. Every field has a
+default, and the defaults are the shipped ``params.yaml`` (a test compares them), so a partial
+file works. Attribute docstrings become the fields' descriptions (the documentation).
+
+A run's configuration is ``params.yaml``, then each overlay (a YAML file deep-merged over it,
+mapping by mapping, e.g. ``configs/paper.yaml``), then the ``--set`` overrides (any depth:
+``baselines.orca.time_horizon=3``, ``agent.per_variant.maspm.gamma=0.9``).
 
 Every problem — a missing file, bad YAML, an unknown key, a value out of range, a malformed
 ``--set`` override — raises :class:`ConfigError` with a single line naming the source, the
-dotted key and what is wrong, e.g.
-``params.yaml: vae.batch_size: Input should be greater than 0 (got -3)``.
+dotted key and what is wrong, e.g. ``params.yaml: vae.batch_size: must be > 0, got -3``.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import copy
 import difflib
 import re
 import typing
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator
 
+from pipeline.agents.baselines import OrcaBaselineParams, SfmBaselineParams
 from pipeline.agents.params import METHOD_NAMES, VARIANT_NAMES, AgentParams
-from pipeline.env.params import EnvParams
+from pipeline.env.params import EnvParams, Section, describe_error
 from pipeline.io import atomic_path
 
 Device = Literal["auto", "cpu", "cuda"]
@@ -41,11 +47,13 @@ __all__ = [
     "LstmParams",
     "Params",
     "ReportParams",
+    "STAGE_SECTIONS",
     "VaeParams",
     "flatten",
     "load_params",
     "params_dict",
     "save_resolved",
+    "select_sections",
 ]
 
 
@@ -57,19 +65,17 @@ class ConfigError(ValueError):
 # The models
 # ---------------------------------------------------------------------------------------------
 
-# Numbers are strict: YAML already types them, so `batch_size: 512.0` or `seed: true` is a slip
-# worth reporting rather than silently coercing. Floats must be finite: `.inf` passes `gt=0`.
-_SECTION_CONFIG = ConfigDict(
-    extra="forbid", frozen=True, strict=True, use_attribute_docstrings=True
-)
+# Every section is a `Section` (pipeline/env/params.py): strict types (YAML already types them,
+# so `batch_size: 512.0` or `seed: true` is a slip worth reporting rather than silently
+# coercing), finite floats (`.inf` passes `gt=0`), frozen, unknown keys rejected.
 
 
-class CollectParams(BaseModel):
+class CollectParams(Section):
     """Random-policy rollouts written to ``data/rollouts/shard-*.parquet``."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "collect"
 
-    episodes: int = Field(4000, gt=0)
+    episodes: int = Field(6000, gt=0)
     """Number of complete episodes to record."""
     num_envs: int = Field(512, gt=0)
     """Environments stepped together in one batch (memory and speed, not the data)."""
@@ -77,22 +83,23 @@ class CollectParams(BaseModel):
     """A Parquet shard is closed once it holds this many steps (rows)."""
 
 
-class VaeParams(BaseModel):
+class VaeParams(Section):
     """The VAE that compresses the 23-d observation into a latent vector."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "vae"
 
     latent_dim: int = Field(16, gt=0)
     """Size of the latent vector z."""
     hidden_dim: int = Field(256, gt=0)
     """Width of the encoder and decoder hidden layers."""
-    kl_weight: float = Field(1.0, ge=0, allow_inf_nan=False)
-    """Weight of the KL term against the reconstruction loss (1 is the plain ELBO)."""
+    kl_weight: float = Field(0.01, ge=0, allow_inf_nan=False)
+    """Weight of the KL term against the reconstruction loss (1 is the plain ELBO, the
+    paper's)."""
     learning_rate: float = Field(1e-3, gt=0, allow_inf_nan=False)
     """Adam learning rate."""
     batch_size: int = Field(512, gt=0)
     """Observations per gradient step."""
-    max_epochs: int = Field(40, gt=0)
+    max_epochs: int = Field(20, gt=0)
     """Upper bound on passes over the training split."""
     patience: int = Field(5, gt=0)
     """Stop after this many epochs without a better validation loss."""
@@ -102,10 +109,10 @@ class VaeParams(BaseModel):
     """`auto` uses CUDA when available, else the CPU."""
 
 
-class LstmParams(BaseModel):
+class LstmParams(Section):
     """The LSTM that predicts the next latent from the latent and the action."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "lstm"
 
     hidden_dim: int = Field(256, gt=0)
     """Size of the LSTM hidden and cell states."""
@@ -115,7 +122,7 @@ class LstmParams(BaseModel):
     """Adam learning rate."""
     batch_size: int = Field(256, gt=0)
     """Windows per gradient step."""
-    max_epochs: int = Field(40, gt=0)
+    max_epochs: int = Field(20, gt=0)
     """Upper bound on passes over the training split."""
     patience: int = Field(5, gt=0)
     """Stop after this many epochs without a better validation loss."""
@@ -125,10 +132,10 @@ class LstmParams(BaseModel):
     """`auto` uses CUDA when available, else the CPU."""
 
 
-class ExperimentParams(BaseModel):
+class ExperimentParams(Section):
     """Which agents the pipeline trains: every variant × every seed (``dvc.yaml``'s matrix)."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "experiment"
 
     variants: list[str] = Field(default_factory=lambda: list(VARIANT_NAMES), min_length=1)
     """Agent variants to train and evaluate (pipeline/agents/params.py lists them)."""
@@ -155,10 +162,10 @@ class ExperimentParams(BaseModel):
         return value
 
 
-class EvalParams(BaseModel):
+class EvalParams(Section):
     """The paired test: every method runs the same scenarios ``0..episodes-1``."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "eval"
 
     episodes: int = Field(500, gt=0)
     """Test scenarios per method and training seed (the paper: 500)."""
@@ -170,30 +177,22 @@ class EvalParams(BaseModel):
     """Where the agents' networks run."""
 
 
-class BaselinesParams(BaseModel):
-    """Overrides of the ORCA and Social Force robots' parameters (pipeline/agents/baselines.py
-    documents each; empty: the defaults)."""
+class BaselinesParams(Section):
+    """The ORCA and Social Force robots' parameters (pipeline/agents/baselines.py documents
+    each, and how it was chosen)."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "baselines"
 
-    orca: dict[str, float | int] = Field(default_factory=dict)
-    """OrcaBaselineParams fields, e.g. safety_margin: 0.2."""
-    sfm: dict[str, float | int] = Field(default_factory=dict)
-    """SfmBaselineParams fields, e.g. human_strength: 0.4."""
-
-    @field_validator("orca", "sfm")
-    @classmethod
-    def _valid_overrides(cls, value: dict[str, Any], info: Any) -> dict[str, Any]:
-        from pipeline.agents.baselines import make_baseline
-
-        make_baseline(info.field_name, **value)  # one-line error naming a bad key or value
-        return value
+    orca: OrcaBaselineParams = Field(default_factory=OrcaBaselineParams)
+    """The ORCA robot (:class:`~pipeline.agents.baselines.OrcaBaselineParams`)."""
+    sfm: SfmBaselineParams = Field(default_factory=SfmBaselineParams)
+    """The Social Force robot (:class:`~pipeline.agents.baselines.SfmBaselineParams`)."""
 
 
-class ReportParams(BaseModel):
+class ReportParams(Section):
     """The report: paired tests, figures."""
 
-    model_config = _SECTION_CONFIG
+    SECTION: ClassVar[str] = "report"
 
     reference: str = "dueling-dqn"
     """The method every other is compared with, scenario by scenario."""
@@ -212,44 +211,13 @@ class ReportParams(BaseModel):
         return value
 
 
-_ENV_TYPES: dict[str, Any] = typing.get_type_hints(EnvParams)
-_AGENT_TYPES: dict[str, Any] = typing.get_type_hints(AgentParams)
-
-
-def _check_strict_types(section: str, hints: Mapping[str, Any], value: Any) -> Any:
-    """Strict YAML types for a section that is a stdlib dataclass (``env``, ``agent``).
-
-    A stdlib dataclass cannot take ``strict=True``, and in lax mode pydantic would read
-    ``num_humans: true`` as 1 or ``orca_avoid_robot: "no"`` as False: check the types here so
-    these sections are as strict as the others.
-    """
-    if not isinstance(value, Mapping):
-        return value
-    for name, given in value.items():
-        expected = hints.get(name)
-        if expected is bool and not isinstance(given, bool):
-            raise ValueError(f"{section}.{name}: expected true or false, got {given!r}")
-        if expected is int and (isinstance(given, bool) or not isinstance(given, int)):
-            raise ValueError(f"{section}.{name}: expected an integer, got {given!r}")
-        if expected is float and (isinstance(given, bool) or not isinstance(given, int | float)):
-            raise ValueError(f"{section}.{name}: expected a number, got {given!r}")
-        if typing.get_origin(expected) is Literal and not isinstance(given, str):
-            choices = ", ".join(map(str, typing.get_args(expected)))
-            raise ValueError(f"{section}.{name}: must be one of {choices}, got {given!r}")
-        if typing.get_origin(expected) is tuple and not isinstance(given, list | tuple):
-            raise ValueError(f"{section}.{name}: expected a list, got {given!r}")
-    return value
-
-
-class Params(BaseModel):
+class Params(Section):
     """Everything ``params.yaml`` can hold; every section is optional."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
-
-    seed: int = Field(0, ge=0, strict=True)
+    seed: int = Field(0, ge=0)
     """Master seed: every random generator of every stage derives from it."""
     env: EnvParams = Field(default_factory=EnvParams)
-    """The simulator's scenario (paper values by default); see pipeline/env/params.py."""
+    """The simulator's scenario (the paper's by default); see pipeline/env/params.py."""
     collect: CollectParams = Field(default_factory=CollectParams)
     """Random-policy data collection."""
     vae: VaeParams = Field(default_factory=VaeParams)
@@ -266,16 +234,6 @@ class Params(BaseModel):
     """ORCA and Social Force robots."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
-
-    @field_validator("agent", mode="before")
-    @classmethod
-    def _agent_types_are_strict(cls, value: Any) -> Any:
-        return _check_strict_types("agent", _AGENT_TYPES, value)
-
-    @field_validator("env", mode="before")
-    @classmethod
-    def _env_types_are_strict(cls, value: Any) -> Any:
-        return _check_strict_types("env", _ENV_TYPES, value)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -340,70 +298,73 @@ def _parse_yaml(text: str, source: str) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
-def _section_keys() -> dict[str, set[str] | None]:
-    """Top-level key -> the keys its section accepts (None for a plain top-level value)."""
-    keys: dict[str, set[str] | None] = {}
-    for name, field in Params.model_fields.items():
-        annotation = field.annotation
-        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-            keys[name] = set(annotation.model_fields)
-        elif dataclasses.is_dataclass(annotation):
-            keys[name] = {f.name for f in dataclasses.fields(annotation)}
-        else:
-            keys[name] = None
-    return keys
+_DICT_ORIGINS = (dict, Mapping, typing.Mapping)
+
+
+def _child(node: Any, part: str) -> tuple[bool, Any]:
+    """Walk one step of a dotted key from ``node`` (a model class or a type): (known, child)."""
+    if isinstance(node, type) and issubclass(node, BaseModel):
+        field = node.model_fields.get(part)
+        return (False, None) if field is None else (True, field.annotation)
+    if typing.get_origin(node) in _DICT_ORIGINS:  # a free mapping (agent.per_variant): any key
+        return True, typing.get_args(node)[1] if typing.get_args(node) else Any
+    if node is Any:
+        return True, Any
+    return False, None  # a plain value has no keys
+
+
+def _is_model(node: Any) -> bool:
+    return isinstance(node, type) and issubclass(node, BaseModel)
 
 
 def _unknown_key(dotted: str) -> str:
     """``unknown key 'vae.bacth_size' (did you mean 'vae.batch_size'?)``."""
-    sections = _section_keys()
-    section, _, name = dotted.partition(".")
-    if name and sections.get(section):
-        candidates = [f"{section}.{key}" for key in sections[section] or ()]
-    else:
-        candidates = list(sections)
-    close = difflib.get_close_matches(dotted, candidates, n=1, cutoff=0.75)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return f"unknown key {dotted!r}{hint}"
+    parts = dotted.split(".")
+    node: Any = Params
+    for i, part in enumerate(parts):
+        known, child = _child(node, part)
+        if not known:
+            hint = ""
+            if _is_model(node):
+                close = difflib.get_close_matches(part, list(node.model_fields), n=1, cutoff=0.75)
+                if close:
+                    hint = f" (did you mean {'.'.join([*parts[:i], close[0], *parts[i + 1 :]])!r}?)"
+            return f"unknown key {dotted!r}{hint}"
+        node = child
+    return f"unknown key {dotted!r}"
 
 
 def _apply_override(raw: dict[str, Any], override: str, source: str) -> str:
-    """Set one ``section.key=value`` in the raw mapping; returns the dotted key."""
+    """Set one ``dotted.key=value`` (any depth) in the raw mapping; returns the dotted key."""
     key, sep, text = override.partition("=")
     key = key.strip()
     if not sep or not key or any(not part for part in key.split(".")):
         raise ConfigError(f"{source}: expected section.key=value")
-    sections = _section_keys()
     parts = key.split(".")
-    if len(parts) > 2 or parts[0] not in sections:
-        raise ConfigError(f"{source}: {_unknown_key(key)}")
-    section_keys = sections[parts[0]]
-    if len(parts) == 1:
-        if section_keys is not None:
-            raise ConfigError(f"{source}: {key!r} is a section; use {key}.key=value")
-    elif section_keys is None or parts[1] not in section_keys:
-        raise ConfigError(f"{source}: {_unknown_key(key)}")
+    node: Any = Params
+    for part in parts:
+        known, node = _child(node, part)
+        if not known:
+            raise ConfigError(f"{source}: {_unknown_key(key)}")
+    if _is_model(node):
+        raise ConfigError(f"{source}: {key!r} is a section; use {key}.key=value")
 
     value = _parse_yaml(text, source)
-    if len(parts) == 1:
-        raw[key] = value
-    else:
-        section = raw.setdefault(parts[0], {})
-        if section is None:  # `vae:` with nothing under it
-            section = raw[parts[0]] = {}
-        if not isinstance(section, dict):
-            raise ConfigError(f"{source}: {parts[0]}: expected a mapping, got {section!r}")
-        section[parts[1]] = value
+    target = raw
+    for depth, part in enumerate(parts[:-1]):
+        child = target.get(part)
+        if child is None:  # missing, or `vae:` with nothing under it
+            child = target[part] = {}
+        if not isinstance(child, dict):
+            where = ".".join(parts[: depth + 1])
+            raise ConfigError(f"{source}: {where}: expected a mapping, got {_short_repr(child)}")
+        target = child
+    target[parts[-1]] = value
     return key
 
 
-def load_params(path: str | Path = "params.yaml", overrides: Sequence[str] = ()) -> Params:
-    """Read, override and validate ``params.yaml``.
-
-    ``overrides`` are ``section.key=value`` strings (``seed=3`` for a top-level key); the value
-    is parsed as YAML, so ``vae.kl_weight=0.5`` is a float and ``env.human_policy=sfm`` a string.
-    Sections missing from the file take their defaults. Raises :class:`ConfigError`.
-    """
+def _read_yaml_mapping(path: str | Path) -> dict[str, Any]:
+    """The top-level mapping of a YAML file (empty for an empty file), or a ConfigError."""
     source = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -413,21 +374,64 @@ def load_params(path: str | Path = "params.yaml", overrides: Sequence[str] = ())
         raise ConfigError(f"{source}: is a directory, expected a YAML file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{source}: cannot read ({_one_line(str(exc))})") from None
-
     raw = _parse_yaml(text, source)
     if raw is None:  # an empty file: all defaults
-        raw = {}
+        return {}
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: expected a mapping of sections, got {type(raw).__name__}")
-    for section, content in list(raw.items()):
-        if content is None and _section_keys().get(str(section)) is not None:
-            raw[section] = {}  # `lstm:` left empty means "all defaults"
+    return raw
 
-    # The error for a bad value names where it came from: the file or the --set that wrote it.
-    origins: dict[str, str] = {}
+
+def _merge(base: dict[str, Any], overlay: Mapping[str, Any], prefix: str = "") -> list[str]:
+    """Deep-merge ``overlay`` into ``base`` in place, mapping by mapping (anything else
+    replaces); returns the dotted keys of the values it wrote. A key left empty (``lstm:``)
+    changes nothing."""
+    written: list[str] = []
+    for key, value in overlay.items():
+        dotted = f"{prefix}{key}"
+        current = base.get(key)
+        if value is None and (current is None or isinstance(current, dict)):
+            continue
+        if isinstance(value, dict) and isinstance(current, dict):
+            written += _merge(current, value, f"{dotted}.")
+        elif isinstance(value, dict) and current is None:
+            base[key] = {}
+            written += _merge(base[key], value, f"{dotted}.")
+        else:
+            base[key] = copy.deepcopy(value)
+            written.append(dotted)
+    return written
+
+
+def load_params(
+    path: str | Path = "params.yaml",
+    overrides: Sequence[str] = (),
+    overlays: Sequence[str | Path] = (),
+) -> Params:
+    """Read ``params.yaml``, merge the overlays, apply the overrides and validate.
+
+    ``overlays`` are YAML files deep-merged over the file in order (mapping by mapping: an
+    overlay's ``agent: {gamma: 0.9}`` changes that one key), e.g. ``configs/paper.yaml``.
+    ``overrides`` then set ``dotted.key=value`` strings, at any depth (``seed=3``,
+    ``baselines.orca.time_horizon=3``, ``agent.per_variant.maspm.gamma=0.9``); the value is
+    parsed as YAML, so ``vae.kl_weight=0.5`` is a float and ``env.human_policy=sfm`` a string.
+    Missing keys take their defaults (which equal the shipped params.yaml). Raises
+    :class:`ConfigError`, naming the file, overlay or ``--set`` a bad value came from.
+    """
+    source = str(path)
+    raw = _read_yaml_mapping(path)
+    # The error for a bad value names where it came from: the file, the overlay or the --set
+    # that wrote it (the last writer of the key or of a mapping above it).
+    origins: list[tuple[str, str]] = []
+    for overlay in overlays:
+        content = _read_yaml_mapping(overlay)
+        origins += [(key, str(overlay)) for key in _merge(raw, content)]
+    for section, content in list(raw.items()):
+        if content is None and _is_model(_child(Params, str(section))[1]):
+            raw[section] = {}  # `lstm:` left empty means "all defaults"
     for override in overrides:
         label = f"--set {override}"
-        origins[_apply_override(raw, override, label)] = label
+        origins.append((_apply_override(raw, override, label), label))
 
     try:
         return Params.model_validate(raw)
@@ -435,17 +439,19 @@ def load_params(path: str | Path = "params.yaml", overrides: Sequence[str] = ())
         raise _translate(exc, source, origins) from None
 
 
-def _translate(exc: ValidationError, source: str, origins: Mapping[str, str]) -> ConfigError:
+def _translate(
+    exc: ValidationError, source: str, origins: Sequence[tuple[str, str]]
+) -> ConfigError:
     """One line out of pydantic's report: the first error, plus how many more there are."""
     errors = exc.errors()
     key, message = _describe(errors[0])
     more = len(errors) - 1
     tail = f" (and {more} more error{'s' if more > 1 else ''})" if more else ""
-    # An error inside a value (``agent.trunk_sizes.1``) comes from the --set of the whole value.
+    # An error inside a value (``agent.trunk_sizes.1``) comes from whoever wrote the whole value.
     origin = next(
         (
             label
-            for set_key, label in origins.items()
+            for set_key, label in reversed(origins)
             if key == set_key or key.startswith(f"{set_key}.")
         ),
         source,
@@ -455,26 +461,10 @@ def _translate(exc: ValidationError, source: str, origins: Mapping[str, str]) ->
 
 def _describe(error: Mapping[str, Any]) -> tuple[str, str]:
     """The dotted key an error is about, and ``<key>: <what is wrong>``."""
-    key = ".".join(str(part) for part in error["loc"])
-    kind = error["type"]
-    given = error.get("input")
-    if kind in ("extra_forbidden", "unexpected_keyword_argument"):
+    if error["type"] in ("extra_forbidden", "unexpected_keyword_argument"):
+        key = ".".join(str(part) for part in error["loc"])
         return key, _unknown_key(key)
-    if kind == "value_error":
-        # Our own checks (and EnvParams.__post_init__) already write "env.room_size: ...".
-        text = _one_line(str(error.get("ctx", {}).get("error", error["msg"])))
-        match = re.match(r"^([A-Za-z_][\w.]*): ", text)
-        if match and (not key or match.group(1).startswith(key)):
-            return match.group(1), text
-        return key, f"{key}: {text}" if key else text
-    if kind == "literal_error":
-        choices = ", ".join(re.findall(r"'([^']*)'", error.get("ctx", {}).get("expected", "")))
-        return key, f"{key}: must be one of {choices}, got {given!r}"
-    if kind in ("model_type", "dataclass_type", "model_attributes_type"):
-        return key, f"{key}: expected a mapping of keys, got {_short_repr(given)}"
-    if kind == "missing":
-        return key, f"{key}: required"
-    return key, f"{key}: {_one_line(error['msg'])} (got {_short_repr(given)})"
+    return describe_error(error)
 
 
 def _short_repr(value: Any, limit: int = 60) -> str:
@@ -490,10 +480,53 @@ def _one_line(text: str) -> str:
 # Output
 # ---------------------------------------------------------------------------------------------
 
+STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
+    "collect": ("seed", "env", "collect"),
+    "train_vae": ("seed", "vae"),
+    "train_lstm": ("seed", "lstm"),
+    "train_agent": ("env", "agent"),
+    "evaluate": ("env", "eval", "experiment.seeds"),
+    "evaluate_baseline": ("env", "eval", "baselines"),
+    "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
+}
+"""Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
+name is one key of a section). ``evaluate_baseline`` reads ``baselines.<its baseline>`` only:
+pass ``(*STAGE_SECTIONS["evaluate_baseline"][:-1], f"baselines.{name}")`` to write just that.
+Give one to :func:`save_resolved` so that a stage's output does not change with parameters
+it never reads."""
+
 
 def params_dict(params: Params) -> dict[str, Any]:
     """The resolved configuration as plain, JSON-able nested dicts (sections in model order)."""
     return params.model_dump(mode="json")
+
+
+def select_sections(data: Mapping[str, Any], sections: Iterable[str]) -> dict[str, Any]:
+    """The parts of ``data`` (a :func:`params_dict`) named by ``sections``, in ``data``'s
+    order: top-level names (``env``) or dotted paths (``agent.solved_window``)."""
+    wanted = [name.split(".") for name in sections]
+    picked: dict[str, Any] = {}
+    for parts in wanted:
+        source: Any = data
+        for depth, part in enumerate(parts):
+            if not isinstance(source, Mapping) or part not in source:
+                raise ValueError(f"unknown section {'.'.join(parts[: depth + 1])!r}")
+            source = source[part]
+        target = picked
+        for part in parts[:-1]:
+            target = target.setdefault(part, {})
+        target[parts[-1]] = copy.deepcopy(source)
+    return _in_order(picked, data)
+
+
+def _in_order(picked: Mapping[str, Any], data: Mapping[str, Any]) -> dict[str, Any]:
+    return {
+        key: _in_order(picked[key], data[key])
+        if isinstance(picked[key], dict) and isinstance(data[key], Mapping)
+        else picked[key]
+        for key in data
+        if key in picked
+    }
 
 
 def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -508,13 +541,21 @@ def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return flat
 
 
-def save_resolved(params: Params, path: str | Path) -> None:
-    """Write the resolved configuration as YAML (atomically); :func:`load_params` reads it back."""
-    body = yaml.safe_dump(
-        params_dict(params), sort_keys=False, default_flow_style=False, allow_unicode=True
-    )
+def save_resolved(params: Params, path: str | Path, sections: Iterable[str] | None = None) -> None:
+    """Write the resolved configuration as YAML (atomically); :func:`load_params` reads it back.
+
+    ``sections`` (e.g. ``STAGE_SECTIONS["collect"]``): write only those top-level sections or
+    dotted keys, so that the file changes only with what the stage reads; None writes all.
+    Reading a partial file back gives the defaults for the rest.
+    """
+    data = params_dict(params)
+    if sections is not None:
+        data = select_sections(data, sections)
+    body = yaml.safe_dump(data, sort_keys=False, default_flow_style=False, allow_unicode=True)
+    what = "" if sections is None else " (the sections the stage reads)"
     header = (
-        "# Resolved configuration (params.yaml + overrides + defaults); written by socnav-wm.\n"
+        f"# Resolved configuration{what}: params.yaml + overlays + overrides + defaults; "
+        "written by socnav-wm.\n"
     )
     with atomic_path(path) as tmp:
         tmp.write_text(header + body, encoding="utf-8")

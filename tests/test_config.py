@@ -7,8 +7,13 @@ import textwrap
 from pathlib import Path
 
 import pytest
+import yaml
+from pydantic import BaseModel
 
+from pipeline.agents.baselines import OrcaBaselineParams, SfmBaselineParams, make_baseline
+from pipeline.agents.params import VARIANT_NAMES, AgentParams
 from pipeline.config import (
+    STAGE_SECTIONS,
     ConfigError,
     Params,
     flatten,
@@ -18,6 +23,11 @@ from pipeline.config import (
 )
 from pipeline.env.params import EnvParams
 
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "params.yaml"
+PAPER = ROOT / "configs" / "paper.yaml"
+TINY = ROOT / "tests" / "tiny.yaml"
+
 
 def write(tmp_path: Path, text: str, name: str = "params.yaml") -> Path:
     path = tmp_path / name
@@ -25,9 +35,9 @@ def write(tmp_path: Path, text: str, name: str = "params.yaml") -> Path:
     return path
 
 
-def error_of(path: Path, overrides: tuple[str, ...] = ()) -> str:
+def error_of(path: Path, overrides: tuple[str, ...] = (), overlays: tuple[Path, ...] = ()) -> str:
     with pytest.raises(ConfigError) as info:
-        load_params(path, overrides)
+        load_params(path, overrides, overlays)
     message = str(info.value)
     assert "\n" not in message
     return message
@@ -41,9 +51,9 @@ def test_empty_file_gives_every_default(tmp_path: Path) -> None:
     assert params == Params()
     assert params.seed == 0
     assert params.env == EnvParams()
-    assert (params.collect.episodes, params.collect.num_envs) == (4000, 512)
+    assert (params.collect.episodes, params.collect.num_envs) == (6000, 512)
     assert params.collect.max_rows_per_shard == 400_000
-    assert (params.vae.latent_dim, params.vae.hidden_dim, params.vae.kl_weight) == (16, 256, 1.0)
+    assert (params.vae.latent_dim, params.vae.hidden_dim, params.vae.kl_weight) == (16, 256, 0.01)
     assert (params.vae.batch_size, params.vae.val_fraction, params.vae.device) == (
         512,
         0.05,
@@ -81,12 +91,13 @@ def test_shipped_style_file_with_partial_sections(tmp_path: Path) -> None:
 
 
 def test_fields_are_documented() -> None:
-    for section in ("collect", "vae", "lstm"):
-        model = type(getattr(Params(), section))
+    def check(model: type[BaseModel], prefix: str) -> None:
         for name, field in model.model_fields.items():
-            assert field.description, f"{section}.{name} has no docstring"
-    for name, field in Params.model_fields.items():
-        assert field.description, name
+            assert field.description, f"{prefix}{name} has no docstring"
+            if isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
+                check(field.annotation, f"{prefix}{name}.")
+
+    check(Params, "")
 
 
 def test_params_are_immutable() -> None:
@@ -142,22 +153,26 @@ def test_int_accepted_where_float_expected(tmp_path: Path) -> None:
 
 def test_out_of_range_value(tmp_path: Path) -> None:
     message = error_of(write(tmp_path, "vae:\n  batch_size: -3\n"))
-    assert message == (
-        f"{tmp_path / 'params.yaml'}: vae.batch_size: Input should be greater than 0 (got -3)"
-    )
+    assert message == (f"{tmp_path / 'params.yaml'}: vae.batch_size: must be > 0, got -3")
 
 
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        ("vae:\n  val_fraction: 0.8\n", "vae.val_fraction: Input should be less than or equal"),
-        ("vae:\n  kl_weight: -0.1\n", "vae.kl_weight: Input should be greater than or equal to 0"),
-        ("vae:\n  learning_rate: .inf\n", "vae.learning_rate: Input should be a finite number"),
-        ("lstm:\n  seq_len: 1\n", "lstm.seq_len: Input should be greater than or equal to 2"),
-        ("collect:\n  episodes: 0\n", "collect.episodes: Input should be greater than 0"),
-        ("seed: -1\n", "seed: Input should be greater than or equal to 0"),
-        ("seed: true\n", "seed: Input should be a valid integer (got True)"),
-        ("vae:\n  batch_size: 512.0\n", "vae.batch_size: Input should be a valid integer"),
+        ("vae:\n  val_fraction: 0.8\n", "vae.val_fraction: must be <= 0.5, got 0.8"),
+        ("vae:\n  kl_weight: -0.1\n", "vae.kl_weight: must be >= 0, got -0.1"),
+        ("vae:\n  learning_rate: .inf\n", "vae.learning_rate: must be finite, got inf"),
+        ("lstm:\n  seq_len: 1\n", "lstm.seq_len: must be >= 2, got 1"),
+        ("collect:\n  episodes: 0\n", "collect.episodes: must be > 0, got 0"),
+        ("seed: -1\n", "seed: must be >= 0, got -1"),
+        ("seed: true\n", "seed: expected an integer, got True"),
+        ("vae:\n  batch_size: 512.0\n", "vae.batch_size: expected an integer, got 512.0"),
+        ("baselines:\n  orca:\n    time_horizon: 0\n", "baselines.orca.time_horizon: must be > 0"),
+        (
+            "baselines:\n  sfm:\n    anisotropy: 2.0\n",
+            "baselines.sfm.anisotropy: must be in [0, 1]",
+        ),
+        ("baselines:\n  orca: 3\n", "baselines.orca: expected a mapping of keys, got 3"),
         ("vae:\n  device: tpu\n", "vae.device: must be one of auto, cpu, cuda, got 'tpu'"),
         ("env:\n  human_policy: bogus\n", "env.human_policy: must be one of mixed, sfm, orca"),
         ("env:\n  room_size: -1\n", "env.room_size: must be > 0"),
@@ -239,14 +254,14 @@ def test_top_level_must_be_a_mapping(tmp_path: Path) -> None:
         ("vae.latent_dim.x=1", "--set vae.latent_dim.x=1: unknown key 'vae.latent_dim.x'"),
         ("vae=3", "--set vae=3: 'vae' is a section; use vae.key=value"),
         ("seed.x=3", "--set seed.x=3: unknown key 'seed.x'"),
-        ("vae.batch_size=-3", "--set vae.batch_size=-3: vae.batch_size: Input should be greater"),
+        ("vae.batch_size=-3", "--set vae.batch_size=-3: vae.batch_size: must be > 0, got -3"),
         ("env.room_size=-1", "--set env.room_size=-1: env.room_size: must be > 0"),
         ("env.human_policy=x", "--set env.human_policy=x: env.human_policy: must be one of"),
         ("vae.batch_size=[1", "--set vae.batch_size=[1: not valid YAML ("),
         (  # an error inside the value still names the --set that wrote the whole value
             "agent.trunk_sizes=[512,abc]",
-            "--set agent.trunk_sizes=[512,abc]: agent.trunk_sizes.1: Input should be a valid "
-            "integer",
+            "--set agent.trunk_sizes=[512,abc]: agent.trunk_sizes.1: expected an integer, "
+            "got 'abc'",
         ),
     ],
 )
@@ -300,7 +315,7 @@ def test_params_dict_is_plain_and_json_able() -> None:
 
 def test_flatten_uses_dotted_keys() -> None:
     flat = flatten(params_dict(Params()))
-    assert flat["vae.kl_weight"] == 1.0
+    assert flat["vae.kl_weight"] == 0.01
     assert flat["env.num_humans"] == 3
     assert flat["seed"] == 0
     assert flatten({"a": {"b": {"c": 1}, "d": {}}}) == {"a.b.c": 1, "a.d": {}}
@@ -309,16 +324,17 @@ def test_flatten_uses_dotted_keys() -> None:
 # --- the agent section (pipeline/agents/params.py) ----------------------------------------------
 
 
-def test_agent_section_shares_the_library_dataclass(tmp_path: Path) -> None:
-    from pipeline.agents.params import AgentParams
-
+def test_agent_section_shares_the_library_model(tmp_path: Path) -> None:
     params = load_params(
         write(tmp_path, "agent:\n  gamma: 0.95\n  trunk_sizes: [128, 128]\n"),
-        ["agent.preset=paper", "agent.learning_rate=1e-3"],
+        ["agent.per_variant.maspm.gamma=0.9", "agent.learning_rate=1e-3"],
     )
     assert isinstance(params.agent, AgentParams)
     assert params.agent == AgentParams(
-        gamma=0.95, trunk_sizes=(128, 128), preset="paper", learning_rate=1e-3
+        gamma=0.95,
+        trunk_sizes=(128, 128),
+        per_variant={"maspm": {"gamma": 0.9}},
+        learning_rate=1e-3,
     )
     assert load_params(write(tmp_path, "")).agent == AgentParams()
     resolved = tmp_path / "resolved.yaml"
@@ -332,11 +348,254 @@ def test_agent_section_shares_the_library_dataclass(tmp_path: Path) -> None:
         ("agent:\n  gamma: 1.5\n", "agent.gamma: must be in [0, 1], got 1.5"),
         ("agent:\n  episodes: 1.5\n", "agent.episodes: expected an integer, got 1.5"),
         ("agent:\n  huber: 1\n", "agent.huber: expected true or false, got 1"),
-        ("agent:\n  preset: fast\n", "agent.preset: must be one of shared, paper, got 'fast'"),
+        ("agent:\n  preset: paper\n", "unknown key 'agent.preset'"),
+        ("agent:\n  backend: torch\n", "unknown key 'agent.backend'"),
         ("agent:\n  trunk_sizes: 5\n", "agent.trunk_sizes: expected a list, got 5"),
         ("agent:\n  gama: 0.9\n", "unknown key 'agent.gama' (did you mean 'agent.gamma'?)"),
+        ("agent:\n  buffer_size: 10\n", "agent.buffer_size: must be >= batch_size (128), got 10"),
+        (
+            "agent:\n  per_variant:\n    fast: {gamma: 0.9}\n",
+            "agent.per_variant: unknown variant 'fast'; expected some of dueling-dqn,",
+        ),
+        (
+            "agent:\n  per_variant:\n    maspm: {gamma: 2.0}\n",
+            "agent.per_variant.maspm.gamma: must be in [0, 1], got 2.0",
+        ),
+        (
+            "agent:\n  per_variant:\n    maspm: {gama: 0.9}\n",
+            "agent.per_variant.maspm.gama: unknown option",
+        ),
+        (  # the result must validate too: a cross-field check inside one variant
+            "agent:\n  per_variant:\n    maspm: {buffer_size: 10}\n",
+            "agent.per_variant.maspm.buffer_size: must be >= batch_size (128), got 10",
+        ),
+        ("agent:\n  per_variant: [1]\n", "agent.per_variant: expected a mapping of keys"),
     ],
 )
 def test_agent_section_errors(tmp_path: Path, text: str, expected: str) -> None:
     path = write(tmp_path, text)
-    assert error_of(path) == f"{path}: {expected}"
+    assert error_of(path).startswith(f"{path}: {expected}"), error_of(path)
+
+
+def test_direct_construction_errors_are_one_line_and_named() -> None:
+    for build, key in (
+        (lambda: EnvParams(num_humans=-1), "env.num_humans: must be >= 0, got -1"),
+        (lambda: EnvParams(room_size=1.0), "env.room_size: a 1.0 m room"),
+        (lambda: AgentParams(batch_size=0), "agent.batch_size: must be > 0, got 0"),
+        (lambda: AgentParams(gamma=True), "agent.gamma: expected a number, got True"),
+        (lambda: OrcaBaselineParams(time_horizon=0), "baselines.orca.time_horizon: must be > 0"),
+        (lambda: SfmBaselineParams(tau=1), "baselines.sfm.tau: unknown option"),
+    ):
+        with pytest.raises(ValueError) as info:
+            build()
+        message = str(info.value)
+        assert "\n" not in message and message.startswith(key), message
+
+
+def test_replace_validates_and_keeps_the_rest() -> None:
+    env = EnvParams().replace(num_humans=5)
+    assert env.num_humans == 5 and env.room_size == EnvParams().room_size
+    agent = AgentParams().replace(trunk_sizes=[64], gamma=0.9)
+    assert agent.trunk_sizes == (64,) and agent.gamma == 0.9
+    with pytest.raises(ValueError, match=r"^agent\.buffer_size: must be >= batch_size"):
+        AgentParams().replace(buffer_size=8)
+    with pytest.raises(ValueError, match=r"^env\.colour: unknown option"):
+        EnvParams().replace(colour="red")
+    with pytest.raises(ValueError, match=r"^env: unknown option\(s\) colour"):
+        EnvParams.from_dict({"colour": "red"})
+    assert EnvParams.from_dict(EnvParams().to_dict()) == EnvParams()
+    assert AgentParams.from_dict(AgentParams().to_dict()) == AgentParams()
+    assert AgentParams().to_dict()["trunk_sizes"] == [512, 128]  # a plain list
+    assert hash(AgentParams(per_variant={"maspm": {"gamma": 0.9}})) is not None
+
+
+def test_resolved_applies_the_variants_overrides() -> None:
+    shared = AgentParams()
+    assert shared.resolved("maspm") is shared
+    agent = AgentParams(per_variant={"maspm": {"gamma": 0.9, "trunk_sizes": [32, 32]}})
+    maspm = agent.resolved("maspm")
+    assert (maspm.gamma, maspm.trunk_sizes, maspm.per_variant) == (0.9, (32, 32), {})
+    assert agent.resolved("dueling-dqn") == shared
+    with pytest.raises(ValueError, match="variant: unknown 'nope'"):
+        agent.resolved("nope")
+
+
+# --- the defaults are params.yaml -----------------------------------------------------------------
+
+
+def test_code_defaults_equal_the_shipped_params_yaml() -> None:
+    assert params_dict(Params()) == params_dict(load_params(SHIPPED))
+    assert Params() == load_params(SHIPPED)
+
+
+def test_every_key_of_the_shipped_params_yaml_is_a_field() -> None:
+    raw = yaml.safe_load(SHIPPED.read_text(encoding="utf-8"))
+
+    def check(values: dict, model: type[BaseModel], prefix: str) -> None:
+        for key, value in values.items():
+            assert key in model.model_fields, f"{prefix}{key} is not a field"
+            annotation = model.model_fields[key].annotation
+            if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+                assert isinstance(value, dict), f"{prefix}{key}"
+                check(value, annotation, f"{prefix}{key}.")
+
+    check(raw, Params, "")
+
+
+def test_baseline_defaults_are_the_controllers_defaults() -> None:
+    params = load_params(SHIPPED)
+    assert params.baselines.orca == OrcaBaselineParams()
+    assert params.baselines.sfm == SfmBaselineParams()
+    assert make_baseline("orca", **params.baselines.orca.to_dict()).config == OrcaBaselineParams()
+
+
+# --- overlays ---------------------------------------------------------------------------------
+
+
+def test_overlays_merge_mapping_by_mapping_in_order(tmp_path: Path) -> None:
+    base = write(tmp_path, "seed: 1\nvae:\n  kl_weight: 0.5\n  batch_size: 64\nlstm:\n")
+    first = write(
+        tmp_path, "vae:\n  kl_weight: 0.25\nbaselines:\n  orca:\n    time_horizon: 3.0\n", "a.yaml"
+    )
+    second = write(tmp_path, "vae:\n  kl_weight: 0.125\nlstm:\n  hidden_dim: 8\n", "b.yaml")
+    params = load_params(base, ["vae.kl_weight=0.0625"], [first, second])
+    assert params.seed == 1
+    assert params.vae.batch_size == 64  # kept: the overlays only touch kl_weight
+    assert params.vae.kl_weight == 0.0625  # the --set comes last
+    assert params.lstm.hidden_dim == 8
+    assert params.baselines.orca.time_horizon == 3.0
+    assert params.baselines.orca.safety_margin == OrcaBaselineParams().safety_margin
+    assert load_params(base, (), [first, second]).vae.kl_weight == 0.125
+
+
+def test_overlay_errors_name_the_overlay(tmp_path: Path) -> None:
+    base = write(tmp_path, "vae:\n  batch_size: 64\n")
+    bad = write(tmp_path, "vae:\n  kl_weight: -1.0\n", "bad.yaml")
+    assert error_of(base, (), (bad,)) == f"{bad}: vae.kl_weight: must be >= 0, got -1.0"
+    unknown = write(tmp_path, "vae:\n  kl_wieght: 1.0\n", "unknown.yaml")
+    assert error_of(base, (), (unknown,)).startswith(f"{unknown}: unknown key 'vae.kl_wieght'")
+    assert (
+        error_of(base, (), (tmp_path / "none.yaml",)) == f"{tmp_path / 'none.yaml'}: file not found"
+    )
+    broken = write(tmp_path, "vae: [1\n", "broken.yaml")
+    assert error_of(base, (), (broken,)).startswith(f"{broken}: not valid YAML (line ")
+    listed = write(tmp_path, "- 1\n", "list.yaml")
+    assert error_of(base, (), (listed,)) == f"{listed}: expected a mapping of sections, got list"
+    # a bad value in the base file still names the base file
+    base = write(tmp_path, "vae:\n  patience: 0\n")
+    assert error_of(base, (), (TINY,)).startswith(f"{base}: vae.patience: must be > 0")
+
+
+def test_paper_overlay_reproduces_the_per_variant_table() -> None:
+    paper = load_params(SHIPPED, ["agent.episodes=10"], [PAPER]).agent
+    assert set(paper.per_variant) == set(VARIANT_NAMES)
+    vanilla = paper.resolved("dueling-dqn")
+    assert (vanilla.gamma, vanilla.buffer_size, vanilla.polyak) == (0.99, 200_000, 0.995)
+    assert (vanilla.optimizer, vanilla.learning_rate, vanilla.grad_clip) == ("adam", 1e-4, 0.5)
+    assert (vanilla.epsilon_decay, vanilla.epsilon_min) == (0.995, 0.01)
+    assert (vanilla.batch_size, vanilla.learning_starts, vanilla.trunk_sizes) == (
+        64,
+        64,
+        (512, 128),
+    )
+    assert (vanilla.huber, vanilla.n_step, vanilla.decode_latents) == (False, 1, False)
+    wm = paper.resolved("wm-dueling-dqn")
+    assert (wm.optimizer, wm.amsgrad, wm.weight_decay) == ("adamw", True, 0.01)
+    step = paper.resolved("2stepahead")
+    assert (step.epsilon_decay, step.epsilon_min, step.optimizer) == (0.9995, 0.1, "adamw")
+    for name in ("maspm", "2stepahead-maspm"):
+        maspm = paper.resolved(name)
+        assert (maspm.gamma, maspm.buffer_size, maspm.polyak) == (0.98, 1_000_000, 0.99)
+        assert (maspm.epsilon_decay, maspm.epsilon_min, maspm.optimizer) == (0.998, 0.01, "adam")
+    assert paper.resolved("maspm").learning_starts == 64
+    assert paper.resolved("2stepahead-maspm").learning_starts == 128
+    assert paper.resolved("maspm").episodes == 10  # run scale is not part of the table
+    for name in VARIANT_NAMES:  # the paper's reward and observation order
+        resolved = paper.resolved(name)
+        assert (resolved.progress_reward, resolved.sort_humans) == (0, False)
+        assert resolved.per_variant == {}
+
+
+def test_tiny_overlay_loads() -> None:
+    params = load_params(SHIPPED, (), [TINY])
+    assert (params.seed, params.collect.episodes, params.agent.trunk_sizes) == (1, 40, (32,))
+    assert params.experiment.variants == ["dueling-dqn", "2stepahead-maspm"]
+
+
+# --- deep overrides -----------------------------------------------------------------------------
+
+
+def test_overrides_at_any_depth(tmp_path: Path) -> None:
+    params = load_params(
+        write(tmp_path, "baselines:\n  orca:\n"),
+        [
+            "baselines.orca.time_horizon=3",
+            "baselines.sfm.side_bias=0.25",
+            "agent.per_variant.maspm.gamma=0.9",
+            "agent.per_variant.maspm.trunk_sizes=[16]",
+        ],
+    )
+    assert params.baselines.orca.time_horizon == 3.0
+    assert params.baselines.sfm.side_bias == 0.25
+    assert params.agent.per_variant == {"maspm": {"gamma": 0.9, "trunk_sizes": [16]}}
+    assert params.agent.resolved("maspm").trunk_sizes == (16,)
+
+
+@pytest.mark.parametrize(
+    ("override", "expected"),
+    [
+        ("baselines.orca.tau=1", "--set baselines.orca.tau=1: unknown key 'baselines.orca.tau'"),
+        (
+            "baselines.orca.time_horizn=1",
+            "--set baselines.orca.time_horizn=1: unknown key 'baselines.orca.time_horizn' "
+            "(did you mean 'baselines.orca.time_horizon'?)",
+        ),
+        ("baselines.orca=3", "--set baselines.orca=3: 'baselines.orca' is a section; use"),
+        ("baselines.orca.time_horizon=0", "--set baselines.orca.time_horizon=0: baselines.orca."),
+        (
+            "agent.per_variant.maspm.gamma=2.0",
+            "--set agent.per_variant.maspm.gamma=2.0: agent.per_variant.maspm.gamma: must be in",
+        ),
+        ("agent.gamma.x=1", "--set agent.gamma.x=1: unknown key 'agent.gamma.x'"),
+    ],
+)
+def test_deep_override_errors(tmp_path: Path, override: str, expected: str) -> None:
+    message = error_of(write(tmp_path, ""), (override,))
+    assert message.startswith(expected), message
+
+
+# --- what each stage writes ---------------------------------------------------------------------
+
+
+def test_save_resolved_writes_only_the_given_sections(tmp_path: Path) -> None:
+    params = load_params(SHIPPED, ["seed=4", "agent.gamma=0.9"])
+    out = tmp_path / "params.yaml"
+    save_resolved(params, out, STAGE_SECTIONS["collect"])
+    written = yaml.safe_load(out.read_text())
+    assert list(written) == ["seed", "env", "collect"]
+    assert written["seed"] == 4
+    back = load_params(out)
+    assert (back.seed, back.env, back.collect) == (params.seed, params.env, params.collect)
+    # a change in a section the stage does not read leaves the file unchanged
+    before = out.read_bytes()
+    save_resolved(
+        load_params(SHIPPED, ["seed=4", "agent.gamma=0.5"]), out, ("seed", "env", "collect")
+    )
+    assert out.read_bytes() == before
+    save_resolved(params, out, STAGE_SECTIONS["report"])
+    written = yaml.safe_load(out.read_text())
+    assert list(written) == ["env", "agent", "eval", "report"]
+    assert written["agent"] == {"solved_window": 100, "solved_success_rate": 0.9}
+    save_resolved(params, out, ("env", "baselines.orca"))
+    assert yaml.safe_load(out.read_text())["baselines"] == {"orca": params.baselines.orca.to_dict()}
+    with pytest.raises(ValueError, match="unknown section 'nope'"):
+        save_resolved(params, out, ("nope",))
+
+
+def test_stage_sections_follow_dvc_yaml() -> None:
+    stages = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+    assert set(STAGE_SECTIONS) == set(stages)
+    for name, stage in stages.items():
+        listed = stage.get("do", stage).get("params", [])
+        expected = tuple("baselines" if entry == "baselines.${item}" else entry for entry in listed)
+        assert STAGE_SECTIONS[name] == expected, name

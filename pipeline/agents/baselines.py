@@ -23,13 +23,13 @@ Usage::
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
+from pydantic import Field, field_validator
 
 from pipeline.env import orca
-from pipeline.env.params import EnvParams
+from pipeline.env.params import EnvParams, Section
 from pipeline.env.state import BatchState
 
 __all__ = [
@@ -127,32 +127,20 @@ def _goal_direction(state: BatchState) -> tuple[np.ndarray, np.ndarray]:
     return unit, distance
 
 
-def _check_fields(instance: Any, positive: tuple[str, ...], non_negative: tuple[str, ...]) -> None:
-    """One-line ValueErrors for bad parameter values, named as in params.yaml."""
-    prefix = f"baselines.{instance.name}"
-    for f in fields(instance):
-        value = getattr(instance, f.name)
-        if f.name == "name":
-            continue
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"{prefix}.{f.name}: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ValueError(f"{prefix}.{f.name}: must be finite, got {value!r}")
-    for name in positive:
-        if getattr(instance, name) <= 0:
-            raise ValueError(f"{prefix}.{name}: must be > 0, got {getattr(instance, name)!r}")
-    for name in non_negative:
-        if getattr(instance, name) < 0:
-            raise ValueError(f"{prefix}.{name}: must be >= 0, got {getattr(instance, name)!r}")
-
-
 # --------------------------------------------------------------------------------------------
 # ORCA
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class OrcaBaselineParams:
+def _positive(default: float) -> Any:
+    return Field(default, gt=0, allow_inf_nan=False)
+
+
+def _non_negative(default: float) -> Any:
+    return Field(default, ge=0, allow_inf_nan=False)
+
+
+class OrcaBaselineParams(Section):
     """The ORCA robot's parameters. Lengths in metres, times in seconds, angles in radians.
 
     The defaults suit this scenario rather than RVO2's examples: everyone moves at ≤ 0.14 m/s
@@ -160,45 +148,39 @@ class OrcaBaselineParams:
     person walking towards it.
     """
 
-    neighbor_dist: float = 4.0
+    SECTION: ClassVar[str] = "baselines.orca"
+    name: ClassVar[str] = "orca"
+
+    neighbor_dist: float = _positive(4.0)
     """Humans whose centre is closer than this to the robot's are avoided (m)."""
-    max_neighbors: int = 10
+    max_neighbors: int = Field(10, gt=0)
     """At most this many nearest humans are avoided (more than the room holds by default)."""
-    time_horizon: float = 5.0
+    time_horizon: float = _positive(5.0)
     """Collisions with humans are avoided over this horizon (s)."""
-    time_horizon_obst: float = 2.0
+    time_horizon_obst: float = _positive(2.0)
     """Collisions with walls are avoided over this horizon (s); walls do not move, so a short
     horizon keeps the robot from being pushed off goals near a wall."""
-    safety_margin: float = 0.2
+    safety_margin: float = _non_negative(0.2)
     """Added to the robot's radius in ORCA (m). The humans do not reciprocate (none sees the
     robot, except SFM humans 5% of the time) while ORCA assumes they take half of the
     avoidance, and they turn towards new goals without warning, so the robot keeps a buffer.
     On 400 scenarios of a tuning seed (not the evaluation's), 0 m gave 25% human collisions,
     0.1 m 5%, 0.2 m 3%, and more did not help."""
-    symmetry_bias: float = 0.02
+    symmetry_bias: float = Field(0.02, allow_inf_nan=False)
     """Angle (rad) by which the preferred velocity is turned to the right. RVO2's examples add a
     small random perturbation to break the perfect symmetry of a head-on encounter, where the
     preferred velocity lies on the velocity obstacle's axis and ORCA only slows down; a fixed
     turn to the right does the same deterministically (and passes people on the robot's left,
     the "keep right" convention)."""
-    heading_gain: float = 1.0
+    heading_gain: float = _non_negative(1.0)
     """Fraction of the heading error turned in one step (see :func:`unicycle_command`)."""
-    name: str = field(default="orca", init=False)
 
-    def __post_init__(self) -> None:
-        _check_fields(
-            self,
-            positive=("neighbor_dist", "max_neighbors", "time_horizon", "time_horizon_obst"),
-            non_negative=("safety_margin", "heading_gain"),
-        )
-        if not float(self.max_neighbors).is_integer():
-            raise ValueError(
-                f"baselines.orca.max_neighbors: expected an integer, got {self.max_neighbors!r}"
-            )
-        if abs(self.symmetry_bias) >= math.pi / 2:
-            raise ValueError(
-                f"baselines.orca.symmetry_bias: must be within ±π/2, got {self.symmetry_bias!r}"
-            )
+    @field_validator("symmetry_bias")
+    @classmethod
+    def _small_bias(cls, value: float) -> float:
+        if abs(value) >= math.pi / 2:
+            raise ValueError(f"must be within ±π/2, got {value!r}")
+        return value
 
 
 class _VelocityBaseline:
@@ -295,8 +277,7 @@ class OrcaBaseline(_VelocityBaseline):
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class SfmBaselineParams:
+class SfmBaselineParams(Section):
     """The Social Force robot's parameters (Helbing & Molnár 1995; Helbing et al. 2000).
 
     Forces are per unit mass (m/s²). Helbing's pedestrian values (A = 2000 N / 80 kg ≈ 25 m/s²,
@@ -305,41 +286,39 @@ class SfmBaselineParams:
     speed and the ranges up to the distance covered in a few steps.
     """
 
-    relaxation_time: float = 1.0
+    SECTION: ClassVar[str] = "baselines.sfm"
+    name: ClassVar[str] = "sfm"
+
+    relaxation_time: float = _positive(1.0)
     """τ of the goal attraction (v0·e_goal − v)/τ (s). The relaxation is integrated exactly over
     a step (v → v0·e + (v − v0·e)·exp(−dt/τ)), which stays stable for τ < dt too."""
-    human_strength: float = 0.4
+    human_strength: float = _non_negative(0.4)
     """A of the human repulsion A·exp((r_ij − d_ij)/B)·n_ij (m/s²), r_ij the sum of radii and
     d_ij the centre distance: the push at contact."""
-    human_range: float = 0.4
+    human_range: float = _positive(0.4)
     """B of the human repulsion (m): the push falls by e for every B of clearance."""
-    wall_strength: float = 0.4
+    wall_strength: float = _non_negative(0.4)
     """A of the wall repulsion A·exp((r − d)/B)·n (m/s²), d the distance to the wall face."""
-    wall_range: float = 0.1
+    wall_range: float = _positive(0.1)
     """B of the wall repulsion (m). Short: goals may lie 0.3 m from a wall."""
-    anisotropy: float = 0.3
+    anisotropy: float = Field(0.3, allow_inf_nan=False)
     """λ of Helbing's field of view: a human straight ahead weighs 1, one behind the robot
     weighs λ (weight λ + (1 − λ)(1 + cos φ)/2, φ the angle between the goal direction and the
     direction to the human)."""
-    side_bias: float = 0.5
+    side_bias: float = _non_negative(0.5)
     """Sideways share of the push from a human ahead of the robot, turning it to its right
     (Helbing & Molnár's "keep right" asymmetry). Without it a person standing on the straight
     line to the goal pushes exactly against the goal attraction and the robot stops in front of
     them; it scales with cos φ (zero for humans beside or behind)."""
-    heading_gain: float = 1.0
+    heading_gain: float = _non_negative(1.0)
     """Fraction of the heading error turned in one step (see :func:`unicycle_command`)."""
-    name: str = field(default="sfm", init=False)
 
-    def __post_init__(self) -> None:
-        _check_fields(
-            self,
-            positive=("relaxation_time", "human_range", "wall_range"),
-            non_negative=("human_strength", "wall_strength", "side_bias", "heading_gain"),
-        )
-        if not 0.0 <= self.anisotropy <= 1.0:
-            raise ValueError(
-                f"baselines.sfm.anisotropy: must be in [0, 1], got {self.anisotropy!r}"
-            )
+    @field_validator("anisotropy")
+    @classmethod
+    def _in_unit(cls, value: float) -> float:
+        if not 0.0 <= value <= 1.0:
+            raise ValueError(f"must be in [0, 1], got {value!r}")
+        return value
 
 
 class SfmBaseline(_VelocityBaseline):
@@ -403,11 +382,11 @@ class SfmBaseline(_VelocityBaseline):
 # Registry
 # --------------------------------------------------------------------------------------------
 
-BASELINES: dict[str, tuple[type, type]] = {
+BASELINES: dict[str, tuple[type, type[OrcaBaselineParams] | type[SfmBaselineParams]]] = {
     "orca": (OrcaBaseline, OrcaBaselineParams),
     "sfm": (SfmBaseline, SfmBaselineParams),
 }
-"""Baseline name → (policy class, parameter dataclass)."""
+"""Baseline name → (policy class, parameter model)."""
 
 
 def make_baseline(name: str, **overrides: Any) -> BaselinePolicy:
@@ -419,11 +398,11 @@ def make_baseline(name: str, **overrides: Any) -> BaselinePolicy:
     if name not in BASELINES:
         raise ValueError(f"unknown baseline {name!r}; expected one of {', '.join(BASELINES)}")
     policy_cls, params_cls = BASELINES[name]
-    known = {f.name for f in fields(params_cls) if f.init}
+    known = set(params_cls.model_fields)
     unknown = sorted(set(overrides) - known)
     if unknown:
         raise ValueError(
             f"baselines.{name}: unknown option(s) {', '.join(unknown)}; "
             f"expected some of {', '.join(sorted(known))}"
         )
-    return policy_cls(replace(params_cls(), **overrides))
+    return policy_cls(params_cls(**overrides))

@@ -4,16 +4,20 @@
 :mod:`pipeline.config`, and the library uses the same class, so both share one definition and
 one set of one-line errors. Keeping it free of torch lets the CLI validate a configuration (and
 list the variants) without the second it takes to import torch.
+
+The paper's per-variant hyper-parameters (paper_spec §5) are the overlay ``configs/paper.yaml``:
+``socnav-wm <stage> --overlay configs/paper.yaml`` (or ``load_params(overlays=[...])``) fills
+:attr:`AgentParams.per_variant`, which :meth:`AgentParams.resolved` applies.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Literal
+import json
+from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import ConfigDict
+from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, model_validator
+
+from pipeline.env.params import Section, describe_error
 
 VARIANT_NAMES: tuple[str, ...] = (
     "dueling-dqn",
@@ -42,73 +46,96 @@ def check_variant(name: str) -> str:
     return name
 
 
-Preset = Literal["shared", "paper"]
 Optimizer = Literal["adam", "adamw"]
 DeviceName = Literal["auto", "cpu", "cuda"]
 
-PRESETS: tuple[str, ...] = ("shared", "paper")
 OPTIMIZERS: tuple[str, ...] = ("adam", "adamw")
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
-UpdateBackend = Literal["torch", "native"]
-UPDATE_BACKENDS: tuple[str, ...] = ("torch", "native")
 
 
-@dataclass(frozen=True)
-class AgentParams:
+def _in_unit(value: float) -> float:
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"must be in [0, 1], got {value!r}")
+    return value
+
+
+def _below_one(value: float) -> float:
+    if not 0.0 <= value < 1.0:
+        raise ValueError(f"must be in [0, 1), got {value!r}")
+    return value
+
+
+def _as_tuple(value: Any) -> Any:
+    # YAML gives a list; the field is a tuple so that the frozen model stays hashable.
+    return tuple(value) if isinstance(value, list) else value
+
+
+def _layer_sizes(value: tuple[int, ...]) -> tuple[int, ...]:
+    if not value or any(size <= 0 for size in value):
+        raise ValueError(f"expected a non-empty list of positive integers, got {list(value)!r}")
+    return value
+
+
+Unit = Annotated[float, Field(allow_inf_nan=False), AfterValidator(_in_unit)]
+"""A finite float in [0, 1]."""
+LayerSizes = Annotated[tuple[int, ...], BeforeValidator(_as_tuple), AfterValidator(_layer_sizes)]
+"""Widths of fully connected layers: a non-empty list of positive integers."""
+
+
+class AgentParams(Section):
     """Hyper-parameters of the DQN agents (``params.yaml``'s ``agent`` section).
 
-    The defaults are the ``shared`` set, used for every variant. ``preset: paper`` replaces the
-    fields of :data:`PAPER_PRESET` by the paper's per-variant values (see :meth:`resolved`).
+    The values are shared by every variant, except what :attr:`per_variant` overrides for one
+    (the paper's table: ``configs/paper.yaml``); :meth:`resolved` gives a variant's values.
     """
 
-    # Unknown keys are an error when pydantic validates this dataclass inside params.yaml.
-    __pydantic_config__ = ConfigDict(extra="forbid")
+    SECTION: ClassVar[str] = "agent"
 
-    preset: Preset = "shared"
-    """`shared`: these values for every variant; `paper`: paper_spec §5's per-variant table."""
-    episodes: int = 10_000
+    episodes: int = Field(10_000, gt=0)
     """Training episodes (finished episodes over all environments)."""
-    num_envs: int = 32
+    num_envs: int = Field(32, gt=0)
     """Environments stepped together; each vector step adds num_envs transitions."""
-    gamma: float = 0.95
+    gamma: Unit = 0.95
     """Discount factor per step (1 s). With the progress reward, 0.95 learned faster and better
     than the paper's 0.99 (a 20-step horizon is what avoiding a person takes)."""
-    learning_rate: float = 5e-4
+    learning_rate: float = Field(5e-4, gt=0, allow_inf_nan=False)
     """Optimiser learning rate."""
     optimizer: Optimizer = "adam"
     """`adam` or `adamw` (the paper used AdamW with amsgrad for two variants)."""
     amsgrad: bool = False
     """Use the AMSGrad variant of the optimiser."""
-    weight_decay: float = 0.0
+    weight_decay: float = Field(0.0, ge=0, allow_inf_nan=False)
     """Decoupled weight decay (AdamW) or L2 penalty (Adam)."""
-    batch_size: int = 64
-    """Transitions per gradient update."""
-    buffer_size: int = 100_000
+    batch_size: int = Field(128, gt=0)
+    """Transitions per gradient update. 128 with 4 updates per vector step replays as many
+    transitions as the earlier 64 with 8, in half the updates (an update of 128 costs about
+    1.3× one of 64 on a CPU core: `socnav-wm bench train`)."""
+    buffer_size: int = Field(100_000, gt=0)
     """Replay capacity (transitions); the oldest are overwritten."""
     learning_starts: int = 5_000
     """Transitions collected before the first gradient update (at least batch_size)."""
-    n_step: int = 1
+    n_step: int = Field(1, gt=0)
     """Steps per replayed transition: the TD target sums n discounted rewards before
     bootstrapping (1: the paper's one-step target)."""
-    updates_per_step: int = 8
+    updates_per_step: int = Field(4, gt=0)
     """Gradient updates per vector step (updates per transition = this / num_envs)."""
-    polyak: float = 0.995
+    polyak: Annotated[float, Field(allow_inf_nan=False), AfterValidator(_below_one)] = 0.995
     """Target network update after every gradient step: θ′ ← polyak·θ′ + (1 − polyak)·θ."""
-    epsilon_start: float = 1.0
+    epsilon_start: Unit = 1.0
     """Exploration rate of the first episodes."""
-    epsilon_decay: float = 0.995
+    epsilon_decay: Annotated[Unit, Field(gt=0)] = 0.995
     """ε ← max(epsilon_min, ε·epsilon_decay) once per finished episode (the paper's rule)."""
-    epsilon_min: float = 0.05
+    epsilon_min: Unit = 0.05
     """Floor of the exploration rate."""
-    grad_clip: float = 10.0
+    grad_clip: float = Field(10.0, ge=0, allow_inf_nan=False)
     """Maximum global gradient norm (0 disables clipping)."""
     huber: bool = False
     """Huber (smooth L1) loss instead of the paper's mean squared TD error."""
-    trunk_sizes: tuple[int, ...] = (512, 128)
+    trunk_sizes: LayerSizes = (512, 128)
     """Widths of the Q-network's shared layers (the paper: 512, 128; also tried 128, 128)."""
-    stream_size: int = 128
+    stream_size: int = Field(128, gt=0)
     """Width of the hidden layer of the value and advantage streams."""
-    progress_reward: float = 1.0
+    progress_reward: float = Field(1.0, ge=0, allow_inf_nan=False)
     """Learning-only reward per metre the robot gets closer to its goal, added to the env's
     reward (SocNavGym's distance reward, paper_spec §3.2; the paper's runs: 0, which learns
     nothing within this project's compute budget). Logged returns are always the env's."""
@@ -118,186 +145,83 @@ class AgentParams:
     """Order the observation's humans nearest first before any variant sees it (the simulator
     lists them in spawn order). The single largest gain measured: greedy success 66% → 83%
     after 4000 episodes of `dueling-dqn`. A world model should be trained on the same order."""
-    horizon: int = 2
+    horizon: int = Field(2, gt=0)
     """Imagined steps of `2stepahead` and `2stepahead-maspm` (the paper tried 2, 4, 8, 16)."""
     maspm_hidden_features: bool = False
     """`2stepahead-maspm`: feed per-action LSTM hidden states (1040-d, the original code)
     instead of the predicted latents (80-d)."""
     carry_imagined: bool = False
     """`2stepahead`: carry the imagined LSTM state to the next real step (the original code)."""
-    decode_latents: bool = False
+    decode_latents: bool = True
     """World-model variants: give the Q-network each latent (the current `z` and the predicted
     ones) decoded by the VAE into observation units, 23 values each, instead of the 16-d code
     (the paper's input). The same information, in the observation's geometry."""
-    solved_success_rate: float = 0.9
+    solved_success_rate: Annotated[Unit, Field(gt=0)] = 0.9
     """`episodes_to_solve` is the first episode where the rolling success rate reaches this."""
-    solved_window: int = 100
+    solved_window: int = Field(100, gt=0)
     """Episodes in the rolling success rate of `episodes_to_solve`."""
-    checkpoint_every: int = 1000
+    checkpoint_every: int = Field(1000, gt=0)
     """Write a resumable checkpoint every this many finished episodes."""
-    eval_episodes: int = 500
+    eval_episodes: int = Field(500, gt=0)
     """Scenarios of the greedy check at the end of training (validation scenarios, neither
     training nor test ones)."""
-    select_every: int = 0
+    select_every: int = Field(1000, ge=0)
     """Every this many episodes, and at the end, run the current network greedily on
     `select_episodes` selection scenarios (their own seed: neither training, validation nor test
     ones) and keep the weights that succeed most often (ties: the later). 0: keep the final
     weights (the paper's way)."""
-    select_episodes: int = 500
+    select_episodes: int = Field(500, gt=0)
     """Selection scenarios of each of those greedy runs."""
     device: DeviceName = "auto"
     """`auto` uses CUDA when available, else the CPU."""
-    update_backend: UpdateBackend = "torch"
-    """How a gradient update is computed: `torch` (PyTorch operations, any device) or `native`
-    (one call of a compiled C kernel, CPU only, about twice as fast at batch 64: README
-    "Speed"). The two round differently, so a training changes with the backend; the shipped
-    runs use `torch`."""
+    per_variant: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    """Per-variant overrides of the fields above, e.g. `maspm: {gamma: 0.98}` (empty: every
+    variant uses the shared values). `configs/paper.yaml` holds the paper's table."""
 
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.type in ("int", "float") and (
-                isinstance(value, bool) or not isinstance(value, int | float)
-            ):
-                raise ValueError(f"agent.{f.name}: expected a number, got {value!r}")
-            if f.type == "int" and not float(value).is_integer():
-                raise ValueError(f"agent.{f.name}: expected an integer, got {value!r}")
-            if f.type == "bool" and not isinstance(value, bool):
-                raise ValueError(f"agent.{f.name}: expected true or false, got {value!r}")
-            if f.type == "float" and not math.isfinite(value):
-                raise ValueError(f"agent.{f.name}: must be finite, got {value!r}")
-        for name, choices in (
-            ("preset", PRESETS),
-            ("optimizer", OPTIMIZERS),
-            ("device", DEVICES),
-            ("update_backend", UPDATE_BACKENDS),
-        ):
-            if getattr(self, name) not in choices:
-                raise ValueError(
-                    f"agent.{name}: must be one of {', '.join(choices)}, "
-                    f"got {getattr(self, name)!r}"
-                )
-        positive = (
-            "episodes", "num_envs", "learning_rate", "batch_size", "buffer_size", "n_step",
-            "updates_per_step", "epsilon_decay", "stream_size", "horizon", "solved_success_rate",
-            "solved_window", "checkpoint_every", "eval_episodes", "select_episodes",
-        )  # fmt: skip
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"agent.{name}: must be > 0, got {getattr(self, name)!r}")
-        for name in ("weight_decay", "grad_clip", "progress_reward", "select_every"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"agent.{name}: must be >= 0, got {getattr(self, name)!r}")
-        unit = ("gamma", "epsilon_decay", "solved_success_rate", "epsilon_start", "epsilon_min")
-        for name in unit:
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"agent.{name}: must be in [0, 1], got {getattr(self, name)!r}")
-        if not 0.0 <= self.polyak < 1.0:
-            raise ValueError(f"agent.polyak: must be in [0, 1), got {self.polyak!r}")
+    @model_validator(mode="after")
+    def _consistent(self) -> Self:
         if self.epsilon_min > self.epsilon_start:
             raise ValueError(
-                f"agent.epsilon_min: must be <= epsilon_start ({self.epsilon_start}), "
+                f"epsilon_min: must be <= epsilon_start ({self.epsilon_start}), "
                 f"got {self.epsilon_min!r}"
             )
         if self.buffer_size < self.batch_size:
             raise ValueError(
-                f"agent.buffer_size: must be >= batch_size ({self.batch_size}), "
-                f"got {self.buffer_size}"
+                f"buffer_size: must be >= batch_size ({self.batch_size}), got {self.buffer_size}"
             )
         if self.buffer_size < self.num_envs:
             raise ValueError(
-                f"agent.buffer_size: must be >= num_envs ({self.num_envs}), got {self.buffer_size}"
+                f"buffer_size: must be >= num_envs ({self.num_envs}), got {self.buffer_size}"
             )
         if not self.batch_size <= self.learning_starts <= self.buffer_size:
             raise ValueError(
-                f"agent.learning_starts: must be between batch_size ({self.batch_size}) and "
+                f"learning_starts: must be between batch_size ({self.batch_size}) and "
                 f"buffer_size ({self.buffer_size}), got {self.learning_starts}"
             )
-        sizes = self.trunk_sizes
-        if (
-            not isinstance(sizes, tuple | list)
-            or not sizes
-            or any(isinstance(s, bool) or not isinstance(s, int) or s <= 0 for s in sizes)
-        ):
-            raise ValueError(
-                f"agent.trunk_sizes: expected a non-empty list of positive integers, got {sizes!r}"
-            )
-        # A list from YAML becomes a tuple, so the frozen dataclass stays hashable.
-        object.__setattr__(self, "trunk_sizes", tuple(sizes))
+        shared = {name: getattr(self, name) for name in type(self).model_fields}
+        shared["per_variant"] = {}
+        for variant, changes in self.per_variant.items():
+            if variant not in VARIANT_NAMES:
+                raise ValueError(
+                    f"per_variant: unknown variant {variant!r}; expected some of "
+                    f"{', '.join(VARIANT_NAMES)}"
+                )
+            if "per_variant" in changes:
+                raise ValueError(f"per_variant.{variant}.per_variant: cannot be nested")
+            try:
+                type(self).model_validate({**shared, **changes})
+            except ValidationError as exc:
+                _, message = describe_error(exc.errors()[0], f"per_variant.{variant}")
+                raise ValueError(message) from None
+        return self
 
-    def to_dict(self) -> dict[str, Any]:
-        values = asdict(self)
-        values["trunk_sizes"] = list(self.trunk_sizes)
-        return values
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> AgentParams:
-        """Build from a mapping, naming any unknown key in the error."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"agent: unknown option(s) {', '.join(unknown)}")
-        return cls(**values)
+    def __hash__(self) -> int:  # per_variant is a dict: hash the values' JSON instead
+        return hash(json.dumps(self.to_dict(), sort_keys=True))
 
     def resolved(self, variant: str) -> AgentParams:
-        """The values a run of ``variant`` uses: ``self``, or with the paper's table applied."""
+        """The values a run of ``variant`` uses: ``self`` with ``per_variant[variant]`` applied
+        (and ``per_variant`` emptied); ``self`` itself when ``per_variant`` is empty."""
         check_variant(variant)
-        if self.preset == "shared":
+        if not self.per_variant:
             return self
-        return dataclasses.replace(self, **PAPER_PRESET[variant])
-
-
-_PAPER_COMMON: dict[str, Any] = {
-    "learning_rate": 1e-4,
-    "batch_size": 64,
-    "learning_starts": 64,
-    "grad_clip": 0.5,
-    "huber": False,
-    "trunk_sizes": (512, 128),
-    "stream_size": 128,
-    "progress_reward": 0.0,
-    "n_step": 1,
-    "sort_humans": False,
-    "decode_latents": False,
-}
-_PAPER_ADAM: dict[str, Any] = {"optimizer": "adam", "amsgrad": False, "weight_decay": 0.0}
-# torch.optim.AdamW's default weight decay, which the paper's code left in place.
-_PAPER_ADAMW: dict[str, Any] = {"optimizer": "adamw", "amsgrad": True, "weight_decay": 0.01}
-_PAPER_VANILLA: dict[str, Any] = {
-    "gamma": 0.99,
-    "buffer_size": 200_000,
-    "polyak": 0.995,
-    "epsilon_start": 1.0,
-    "epsilon_decay": 0.995,
-    "epsilon_min": 0.01,
-}
-_PAPER_MASPM: dict[str, Any] = {
-    "gamma": 0.98,
-    "buffer_size": 1_000_000,
-    "polyak": 0.99,
-    "epsilon_start": 1.0,
-    "epsilon_decay": 0.998,
-    "epsilon_min": 0.01,
-}
-PAPER_PRESET: dict[str, dict[str, Any]] = {
-    "dueling-dqn": {**_PAPER_COMMON, **_PAPER_ADAM, **_PAPER_VANILLA},
-    "wm-dueling-dqn": {**_PAPER_COMMON, **_PAPER_ADAMW, **_PAPER_VANILLA},
-    "2stepahead": {
-        **_PAPER_COMMON,
-        **_PAPER_ADAMW,
-        **_PAPER_VANILLA,
-        "epsilon_decay": 0.9995,
-        "epsilon_min": 0.1,
-    },
-    "maspm": {**_PAPER_COMMON, **_PAPER_ADAM, **_PAPER_MASPM},
-    # ADTSPHSM waited for 2 batches before its first update.
-    "2stepahead-maspm": {**_PAPER_COMMON, **_PAPER_ADAM, **_PAPER_MASPM, "learning_starts": 128},
-}
-"""Per-variant values of paper_spec §5's table (and its update rule: lr 1e-4, batch 64, first
-update once the buffer holds a batch, gradient-norm clip 0.5, MSE loss, 512-128 trunk; and the
-paper's reward alone: no progress reward). Run scale
-(``episodes``, ``num_envs``, ``updates_per_step``) and the bug-compatibility flags
-(``bootstrap_truncation``, ``carry_imagined``, ``maspm_hidden_features``) are not part of the
-preset: the paper's exact setting is additionally ``num_envs: 1``, ``updates_per_step: 1``,
-``episodes: 200000``, ``bootstrap_truncation: false``, ``carry_imagined: true``,
-``maspm_hidden_features: true``, and ``select_every: 0`` (the final weights)."""
+        return self.replace(**self.per_variant.get(variant, {}), per_variant={})

@@ -1,17 +1,33 @@
 """Scenario parameters of the simulator, with the paper's values as defaults (paper_spec §1–§3).
 
-One frozen dataclass, validated on construction: ``gym.make("SocNav-v0", **kwargs)``,
+One frozen pydantic model, validated on construction: ``gym.make("SocNav-v0", **kwargs)``,
 ``params.yaml``'s ``env`` section and the tests all build it, so a bad value gets the same
 one-line error everywhere.
+
+This module also holds :class:`Section`, the strict base of every configuration section (here,
+in the lowest layer, so that :mod:`pipeline.agents.params` and :mod:`pipeline.agents.baselines`
+can share it without importing :mod:`pipeline.config`), and :func:`describe_error`, the
+one-line wording of a validation error that :mod:`pipeline.config` uses too.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Literal
+import re
+from collections.abc import Mapping
+from typing import Any, ClassVar, Literal, Self
 
-from pydantic import ConfigDict
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+__all__ = [
+    "HUMAN_POLICIES",
+    "REWARD_KINDS",
+    "SECTION_CONFIG",
+    "EnvParams",
+    "Section",
+    "describe_error",
+    "describe_errors",
+]
 
 HumanPolicy = Literal["mixed", "sfm", "orca"]
 RewardKind = Literal["paper", "dense"]
@@ -19,123 +35,229 @@ RewardKind = Literal["paper", "dense"]
 HUMAN_POLICIES: tuple[str, ...] = ("mixed", "sfm", "orca")
 REWARD_KINDS: tuple[str, ...] = ("paper", "dense")
 
+# Numbers are strict: YAML already types them, so `batch_size: 512.0` or `seed: true` is a slip
+# worth reporting rather than silently coercing (an int is accepted where a float is expected).
+# Floats must be finite (`allow_inf_nan=False` on every float field): `.inf` passes `gt=0`.
+SECTION_CONFIG = ConfigDict(extra="forbid", frozen=True, strict=True, use_attribute_docstrings=True)
 
-@dataclass(frozen=True)
-class EnvParams:
+_NAMED = re.compile(r"^([A-Za-z_][\w.]*): (.*)$", re.DOTALL)
+
+
+def _short_repr(value: Any, limit: int = 60) -> str:
+    text = " ".join(repr(value).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _bound(value: Any) -> Any:
+    """``0`` rather than ``0.0`` in a message about a float field's bound."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+def describe_error(error: Mapping[str, Any], prefix: str = "") -> tuple[str, str]:
+    """One pydantic error as ``(dotted key, "<key>: <what is wrong>")``, in the project's words.
+
+    ``prefix`` is the dotted name of the model that was validated (``env``, ``baselines.orca``;
+    empty for the top level). A ``ValueError`` raised by a model validator as ``"field: text"``
+    is about that field of the model. An unknown key gives ``"<key>: unknown option"`` (the
+    configuration loader words it with a suggestion instead).
+    """
+    parts = [prefix] if prefix else []
+    parts += [str(part) for part in error["loc"]]
+    key = ".".join(parts)
+    kind = error["type"]
+    ctx = error.get("ctx") or {}
+    got = f"got {_short_repr(error.get('input'))}"
+    if kind == "value_error":
+        text = " ".join(str(ctx.get("error", error["msg"])).split())
+        match = _NAMED.match(text)
+        if match:  # "field: text" from a model validator (or already "section.field: text")
+            named = match.group(1)
+            key = named if not key or named.startswith(f"{key}.") else f"{key}.{named}"
+            text = match.group(2)
+        return key, f"{key}: {text}" if key else text
+    simple = {
+        "greater_than": f"must be > {_bound(ctx.get('gt'))}, {got}",
+        "greater_than_equal": f"must be >= {_bound(ctx.get('ge'))}, {got}",
+        "less_than": f"must be < {_bound(ctx.get('lt'))}, {got}",
+        "less_than_equal": f"must be <= {_bound(ctx.get('le'))}, {got}",
+        "finite_number": f"must be finite, {got}",
+        "int_type": f"expected an integer, {got}",
+        "int_from_float": f"expected an integer, {got}",
+        "int_parsing": f"expected an integer, {got}",
+        "float_type": f"expected a number, {got}",
+        "float_parsing": f"expected a number, {got}",
+        "bool_type": f"expected true or false, {got}",
+        "bool_parsing": f"expected true or false, {got}",
+        "string_type": f"expected a string, {got}",
+        "list_type": f"expected a list, {got}",
+        "tuple_type": f"expected a list, {got}",
+        "dict_type": f"expected a mapping of keys, {got}",
+        "model_type": f"expected a mapping of keys, {got}",
+        "model_attributes_type": f"expected a mapping of keys, {got}",
+        "too_short": f"must have at least {ctx.get('min_length')} item(s), {got}",
+        "extra_forbidden": "unknown option",
+        "unexpected_keyword_argument": "unknown option",
+        "missing": "required",
+    }
+    if kind == "literal_error":
+        choices = ", ".join(re.findall(r"'([^']*)'", str(ctx.get("expected", ""))))
+        text = f"must be one of {choices}, {got}"
+    elif kind in simple:
+        text = simple[kind]
+    else:
+        text = f"{' '.join(str(error['msg']).split())} ({got})"
+    return key, f"{key}: {text}" if key else text
+
+
+def describe_errors(exc: ValidationError, prefix: str = "") -> str:
+    """The first error of ``exc`` in one line, plus how many more there are."""
+    errors = exc.errors()
+    _, message = describe_error(errors[0], prefix)
+    more = len(errors) - 1
+    return message + (f" (and {more} more error{'s' if more > 1 else ''})" if more else "")
+
+
+class Section(BaseModel):
+    """A strict, frozen configuration section with one-line errors named by dotted key.
+
+    ``SECTION`` is the section's dotted name in ``params.yaml`` (``env``, ``agent``,
+    ``baselines.orca``): building one in Python with a bad value raises a ``ValueError`` whose
+    single line starts with ``<SECTION>.<field>:``.
+    """
+
+    model_config = SECTION_CONFIG
+
+    SECTION: ClassVar[str] = ""
+
+    def __init__(self, /, **values: Any) -> None:
+        try:
+            super().__init__(**values)
+        except ValidationError as exc:
+            raise ValueError(describe_errors(exc, type(self).SECTION)) from None
+
+    # Validation inside another model (``Params``, ``model_validate``) must not go through this
+    # __init__: pydantic would call it and get one flattened ValueError instead of the errors
+    # with their locations. Marking it as pydantic's own __init__ keeps the plain path there.
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
+
+    def replace(self, **changes: Any) -> Self:
+        """A copy with ``changes`` applied, validated like a new instance."""
+        current = {name: getattr(self, name) for name in type(self).model_fields}
+        return type(self)(**{**current, **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """The values as a plain, JSON-able dict (lists, not tuples)."""
+        return self.model_dump(mode="json")
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> Self:
+        """Build from a mapping, naming any unknown key in the error."""
+        unknown = sorted(set(values) - set(cls.model_fields))
+        if unknown:
+            raise ValueError(f"{cls.SECTION}: unknown option(s) {', '.join(map(str, unknown))}")
+        return cls(**values)
+
+
+def _positive(default: float) -> Any:
+    return Field(default, gt=0, allow_inf_nan=False)
+
+
+def _non_negative(default: float) -> Any:
+    return Field(default, ge=0, allow_inf_nan=False)
+
+
+def _finite(default: float) -> Any:
+    return Field(default, allow_inf_nan=False)
+
+
+class EnvParams(Section):
     """Every constant of the scenario. Lengths in metres, speeds in m/s, angles in radians."""
 
-    # Unknown keys are an error when pydantic validates this dataclass inside params.yaml.
-    __pydantic_config__ = ConfigDict(extra="forbid")
+    SECTION: ClassVar[str] = "env"
 
-    num_humans: int = 3
+    num_humans: int = Field(3, ge=0)
     """Number of people in the room."""
-    room_size: float = 10.0
+    room_size: float = _positive(10.0)
     """Outer side of the square room (m), centred at the origin."""
-    wall_thickness: float = 0.2
+    wall_thickness: float = _non_negative(0.2)
     """Walls lie inside the room's outline; their inner faces are at ±(room_size/2 − thickness)."""
-    spawn_margin: float = 0.5
+    spawn_margin: float = _non_negative(0.5)
     """Robot, humans and goals are drawn uniformly in ±(room_size/2 − spawn_margin)."""
-    dt: float = 1.0
+    dt: float = _positive(1.0)
     """Simulation time step (s)."""
-    max_steps: int = 201
+    max_steps: int = Field(201, gt=0)
     """Steps after which an episode is truncated (the paper's env stops when ticks > 200)."""
-    robot_radius: float = 0.3
-    robot_max_speed: float = 0.14
+    robot_radius: float = _positive(0.3)
+    """Radius of the robot's disc (m)."""
+    robot_max_speed: float = _positive(0.14)
     """Linear speed of the `forward` action and the clip of continuous commands (m/s)."""
-    robot_max_rotation: float = 0.387596899
+    robot_max_rotation: float = _positive(0.387596899)
     """Angular speed of the rotate actions and the clip of continuous commands (rad/s)."""
-    goal_radius: float = 0.5
+    goal_radius: float = _positive(0.5)
     """The goal is reached when the robot centre is within robot_radius + goal_radius."""
-    min_goal_distance: float = 0.0
+    min_goal_distance: float = _non_negative(0.0)
     """Minimum initial robot-goal distance (m); 0 reproduces the paper's uniform draw."""
-    human_radius: float = 0.36
-    human_max_speed: float = 0.14
-    human_goal_radius: float = 0.25
+    human_radius: float = _positive(0.36)
+    """Radius of a person's disc (m)."""
+    human_max_speed: float = _positive(0.14)
+    """Preferred (and maximum) walking speed of the people (m/s)."""
+    human_goal_radius: float = _non_negative(0.25)
     """A human draws a new goal when within human_radius + human_goal_radius of it."""
-    human_speed_threshold: float = 0.05
+    human_speed_threshold: float = _non_negative(0.05)
     """Human speeds below this are set to 0, as in the paper's environment."""
     human_policy: HumanPolicy = "mixed"
     """`mixed` draws SFM or ORCA per human per episode (50/50); `sfm` or `orca` for all."""
-    sfm_avoid_robot_prob: float = 0.05
+    sfm_avoid_robot_prob: float = Field(0.05, ge=0, le=1, allow_inf_nan=False)
     """Probability, per human per step, that an SFM human treats the robot as an obstacle."""
     orca_avoid_robot: bool = False
     """Whether ORCA humans see the robot (as a non-reciprocating agent). The paper: no."""
     reward: RewardKind = "paper"
     """`paper`: paper_spec §3.1 (sparse, refunded on failure); `dense`: per-step penalties."""
-    reach_reward: float = 1.0
-    failure_reward: float = -1.0
-    alive_penalty: float = -0.0005
-    discomfort_distance: float = 0.9999
-    discomfort_factor: float = 0.01
-    orca_neighbor_dist: float = 1.44
-    orca_max_neighbors: int = 3
-    orca_time_horizon: float = 5.0
-    orca_time_horizon_obst: float = 5.0
-    sfm_wall_range: float = 0.05
+    reach_reward: float = _finite(1.0)
+    """Reward for reaching the goal."""
+    failure_reward: float = _finite(-1.0)
+    """Reward for a collision (with a person or a wall)."""
+    alive_penalty: float = _finite(-0.0005)
+    """`dense` reward: added at every step."""
+    discomfort_distance: float = _non_negative(0.9999)
+    """`dense` reward: people closer than this to the robot (m) cost discomfort."""
+    discomfort_factor: float = _non_negative(0.01)
+    """`dense` reward: weight of the discomfort penalty."""
+    orca_neighbor_dist: float = _positive(1.44)
+    """ORCA humans: others closer than this (m) are avoided."""
+    orca_max_neighbors: int = Field(3, gt=0)
+    """ORCA humans: at most this many nearest others are avoided."""
+    orca_time_horizon: float = _positive(5.0)
+    """ORCA humans: collisions with others are avoided over this horizon (s)."""
+    orca_time_horizon_obst: float = _positive(5.0)
+    """ORCA humans: collisions with walls are avoided over this horizon (s)."""
+    sfm_wall_range: float = _positive(0.05)
     """r0 of the exponential wall/robot repulsion exp(−d/r0) (m)."""
-    sfm_gamma: float = 0.25
-    sfm_n: float = 1.0
-    sfm_n_prime: float = 1.0
-    sfm_lambda: float = 1.0
-    sfm_weight: float = 1.0 / math.sqrt(3.0)
+    sfm_gamma: float = _positive(0.25)
+    """SFM humans: γ of the anisotropic interaction with other humans."""
+    sfm_n: float = _finite(1.0)
+    """SFM humans: n of the interaction's angular decay."""
+    sfm_n_prime: float = _finite(1.0)
+    """SFM humans: n′ of the interaction's angular decay (sideways part)."""
+    sfm_lambda: float = _finite(1.0)
+    """SFM humans: λ weighting the direction of motion against the relative position."""
+    sfm_weight: float = _finite(1.0 / math.sqrt(3.0))
     """Weight of each of the three SFM force terms (goal, obstacles, other humans)."""
 
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.type in ("int", "float") and (
-                isinstance(value, bool) or not isinstance(value, int | float)
-            ):
-                raise ValueError(f"env.{f.name}: expected a number, got {value!r}")
-            if f.type == "int" and not float(value).is_integer():
-                raise ValueError(f"env.{f.name}: expected an integer, got {value!r}")
-            if f.type == "bool" and not isinstance(value, bool):
-                raise ValueError(f"env.{f.name}: expected true or false, got {value!r}")
-            if f.type == "float" and not math.isfinite(value):
-                raise ValueError(f"env.{f.name}: must be finite, got {value!r}")
-        if self.human_policy not in HUMAN_POLICIES:
-            raise ValueError(
-                f"env.human_policy: must be one of {', '.join(HUMAN_POLICIES)}, "
-                f"got {self.human_policy!r}"
-            )
-        if self.reward not in REWARD_KINDS:
-            raise ValueError(
-                f"env.reward: must be one of {', '.join(REWARD_KINDS)}, got {self.reward!r}"
-            )
-        positive = (
-            "room_size", "dt", "max_steps", "robot_radius", "robot_max_speed",
-            "robot_max_rotation", "goal_radius", "human_radius", "human_max_speed",
-            "orca_neighbor_dist", "orca_max_neighbors", "orca_time_horizon",
-            "orca_time_horizon_obst", "sfm_wall_range", "sfm_gamma",
-        )  # fmt: skip
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"env.{name}: must be > 0, got {getattr(self, name)!r}")
-        non_negative = (
-            "num_humans", "wall_thickness", "spawn_margin", "human_goal_radius",
-            "human_speed_threshold", "min_goal_distance", "discomfort_distance",
-            "discomfort_factor",
-        )  # fmt: skip
-        for name in non_negative:
-            if getattr(self, name) < 0:
-                raise ValueError(f"env.{name}: must be >= 0, got {getattr(self, name)!r}")
-        if not 0.0 <= self.sfm_avoid_robot_prob <= 1.0:
-            raise ValueError(
-                f"env.sfm_avoid_robot_prob: must be in [0, 1], got {self.sfm_avoid_robot_prob!r}"
-            )
+    @model_validator(mode="after")
+    def _fits_in_the_room(self) -> Self:
         if self.spawn_half_size <= max(self.robot_radius, self.human_radius):
             raise ValueError(
-                f"env.room_size: a {self.room_size} m room with spawn_margin "
+                f"room_size: a {self.room_size} m room with spawn_margin "
                 f"{self.spawn_margin} leaves no room to spawn anything"
             )
         if self.spawn_half_size > self.wall_half_size:
-            raise ValueError(
-                "env.spawn_margin: must be >= wall_thickness (spawns inside the walls)"
-            )
+            raise ValueError("spawn_margin: must be >= wall_thickness (spawns inside the walls)")
         if self.min_goal_distance >= 2 * math.sqrt(2) * self.spawn_half_size:
             raise ValueError(
-                f"env.min_goal_distance: {self.min_goal_distance} m cannot fit in the spawn area"
+                f"min_goal_distance: {self.min_goal_distance} m cannot fit in the spawn area"
             )
+        return self
 
     @property
     def wall_half_size(self) -> float:
@@ -151,15 +273,3 @@ class EnvParams:
     def success_distance(self) -> float:
         """Robot-goal centre distance under which the goal is reached (m): 0.8 by default."""
         return self.robot_radius + self.goal_radius
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> EnvParams:
-        """Build from a mapping, naming any unknown key in the error."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"env: unknown option(s) {', '.join(unknown)}")
-        return cls(**values)
