@@ -44,6 +44,13 @@ class RolloutError(ValueError):
     """A rollout file or dataset is missing, unreadable, or inconsistent (one-line message)."""
 
 
+FINITE_COLUMNS: tuple[str, ...] = ("obs", "next_obs", "reward")
+"""Float columns the world model and the agents learn from: every value must be finite.
+
+Other float columns may legitimately hold ``inf`` (``dmin`` with no humans in the scene).
+"""
+
+
 def shard_name(index: int) -> str:
     """File name of the ``index``-th shard: ``shard-00000.parquet``."""
     return f"shard-{index:05d}.parquet"
@@ -328,7 +335,27 @@ def _read_shard(
         table = table.cast(target)
     except (pa.ArrowException, ValueError) as exc:
         raise RolloutError(f"{path}: cannot match the rollout schema ({_first_line(exc)})") from exc
+    _check_finite(path, table)
     return table, file_humans
+
+
+def _check_finite(path: Path, table: pa.Table) -> None:
+    """Refuse NaN or infinite values in the :data:`FINITE_COLUMNS` of one shard (vectorised).
+
+    Raises:
+        RolloutError: naming the shard, the first offending row (within the shard) and column.
+    """
+    for name in FINITE_COLUMNS:
+        if name not in table.column_names:
+            continue
+        values = column_to_numpy(table, name)
+        finite = np.isfinite(values)
+        if finite.all():
+            continue
+        row, *position = np.argwhere(~finite)[0]
+        label = f"{name}[{position[0]}]" if position else name
+        value = values[(row, *position)]
+        raise RolloutError(f"{path}: row {row}, column {label}: not finite ({value})")
 
 
 def read_rollouts(path_or_dir: str | Path, columns: Sequence[str] | None = None) -> pa.Table:
@@ -341,7 +368,8 @@ def read_rollouts(path_or_dir: str | Path, columns: Sequence[str] | None = None)
     Raises:
         RolloutError: one line naming the file, when the path is missing, the directory holds
             no shards, a file is not readable Parquet (truncated or corrupt), its schema version
-            is not ``SCHEMA_VERSION``, columns are missing, or shards disagree on ``num_humans``.
+            is not ``SCHEMA_VERSION``, columns are missing, shards disagree on ``num_humans``,
+            or a value of a :data:`FINITE_COLUMNS` column is NaN or infinite.
     """
     path = Path(path_or_dir)
     if not path.exists():

@@ -41,6 +41,31 @@ class ModelFileError(ValueError):
     """A model file is missing, unreadable, or not the expected kind (one-line message)."""
 
 
+class NonFiniteTrainingError(ValueError):
+    """A training loss or the weights became NaN or infinite; training stopped (one line)."""
+
+
+def _check_finite_loss(what: str, loss: float, epoch: int, batch: int | None = None) -> None:
+    """Stop training at the first non-finite training (``batch`` given) or validation loss."""
+    if math.isfinite(loss):
+        return
+    where = f"epoch {epoch}" + ("" if batch is None else f" (batch {batch})")
+    kind = "training" if batch is not None else "validation"
+    raise NonFiniteTrainingError(
+        f"{what} training stopped: {kind} loss became {loss} at {where}; no model was written"
+    )
+
+
+def _check_finite_weights(what: str, model: torch.nn.Module, epoch: int) -> None:
+    """Stop training when any weight is NaN or infinite at the end of an epoch."""
+    for name, parameter in model.named_parameters():
+        if not bool(torch.isfinite(parameter).all()):
+            raise NonFiniteTrainingError(
+                f"{what} training stopped: weight {name} became non-finite at epoch {epoch}; "
+                "no model was written"
+            )
+
+
 def resolve_device(device: torch.device | str) -> torch.device:
     """``torch.device`` from a device or a name; ``"auto"`` picks CUDA when available.
 
@@ -211,6 +236,10 @@ def train_vae(
 
     Returns:
         :class:`VAETrainResult` with the best-validation weights restored.
+
+    Raises:
+        NonFiniteTrainingError: a training or validation loss, or a weight at the end of an
+            epoch, is NaN or infinite (before ``on_epoch`` sees that epoch).
     """
     device = resolve_device(device)
     train_obs = np.asarray(train_obs, dtype=np.float32)
@@ -233,15 +262,19 @@ def train_vae(
         model.train()
         loss_sum = 0.0
         order = torch.randperm(len(train_x), generator=shuffle_generator).to(device)
-        for index in order.split(batch_size):
+        for batch_number, index in enumerate(order.split(batch_size), start=1):
             obs = train_x[index]
             recon, mu, logvar = model(obs, sample=True, generator=noise_generator)
             total, _, _ = vae_loss(recon, model.standardize(obs), mu, logvar, kl_weight)
+            loss_value = float(total.detach())
+            _check_finite_loss("VAE", loss_value, epoch, batch_number)
             optimizer.zero_grad(set_to_none=True)
             total.backward()
             optimizer.step()
-            loss_sum += float(total.detach()) * len(index)
+            loss_sum += loss_value * len(index)
+        _check_finite_weights("VAE", model, epoch)
         val = evaluate_vae(model, val_x, kl_weight)
+        _check_finite_loss("VAE", val["val_loss"], epoch)
         row = {
             "epoch": float(epoch),
             "train_loss": loss_sum / len(train_x),
@@ -340,6 +373,10 @@ def train_lstm(
 
     Returns:
         :class:`LSTMTrainResult` with the best-validation weights restored.
+
+    Raises:
+        NonFiniteTrainingError: a training or validation loss, or a weight at the end of an
+            epoch, is NaN or infinite (before ``on_epoch`` sees that epoch).
     """
     device = resolve_device(device)
     if train_windows.num_windows == 0 or val_windows.num_windows == 0:
@@ -357,18 +394,22 @@ def train_lstm(
         model.train()
         error_sum, steps = 0.0, 0.0
         order = torch.randperm(train.num_windows, generator=shuffle_generator).to(device)
-        for index in order.split(batch_size):
+        for batch_number, index in enumerate(order.split(batch_size), start=1):
             batch = train.select(index)
             prediction, _ = model(batch.inputs_z, batch.actions)
             loss = masked_mse(prediction, batch.targets, batch.mask)
+            loss_value = float(loss.detach())
+            _check_finite_loss("LSTM", loss_value, epoch, batch_number)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), max_norm=1.0)
             optimizer.step()
             count = float(batch.mask.sum())
-            error_sum += float(loss.detach()) * count
+            error_sum += loss_value * count
             steps += count
+        _check_finite_weights("LSTM", model, epoch)
         val_loss = _lstm_val_loss(model, val_windows, EVAL_CHUNK // 16)
+        _check_finite_loss("LSTM", val_loss, epoch)
         row = {
             "epoch": float(epoch),
             "train_loss": error_sum / max(steps, 1.0),

@@ -232,3 +232,34 @@ def test_validate_episodes_catches_bad_flags_and_steps() -> None:
     interleaved = {name: np.concatenate([v, v[:5]]) for name, v in columns.items()}
     with pytest.raises(RolloutError, match="episode 0: rows are not contiguous"):
         validate_episodes(_table(interleaved))
+
+
+def test_non_finite_observation_is_refused_naming_shard_row_and_column(tmp_path: Path) -> None:
+    episodes = make_episodes(0, [20, 20, 20])
+    episodes["obs"][27, 5] = np.nan  # row 7 of the second shard (20 rows per shard)
+    paths = write_dataset(tmp_path, [episodes], max_rows=20)
+    with pytest.raises(RolloutError) as error:
+        read_rollouts(tmp_path, columns=["episode_id", "obs"])
+    assert str(error.value) == f"{paths[1]}: row 7, column obs[5]: not finite (nan)"
+    _assert_one_line_naming(error, paths[1])
+    # The other shards are clean and read on their own.
+    assert read_rollouts(paths[0]).num_rows == 20
+
+
+def test_infinite_next_obs_and_reward_are_refused(tmp_path: Path) -> None:
+    episodes = make_episodes(0, [10])
+    episodes["next_obs"][3, 0] = -np.inf
+    (path,) = write_dataset(tmp_path, [episodes], max_rows=100)
+    with pytest.raises(RolloutError, match=r"row 3, column next_obs\[0\]: not finite \(-inf\)"):
+        read_rollouts(path)
+    episodes = make_episodes(0, [10])
+    episodes["reward"][9] = np.inf
+    (path,) = write_dataset(tmp_path, [episodes], max_rows=100)
+    with pytest.raises(RolloutError, match=r"row 9, column reward: not finite \(inf\)"):
+        read_rollouts(path)
+    # Columns not read are not checked, and dmin may be infinite (no human in sight).
+    assert read_rollouts(path, columns=["t", "obs"]).num_rows == 10
+    episodes = make_episodes(0, [10])
+    episodes["dmin"][:] = np.inf
+    write_dataset(tmp_path, [episodes], max_rows=100)
+    assert read_rollouts(tmp_path).num_rows == 10

@@ -1,5 +1,6 @@
 """The latent LSTM: step form == sequence form, all-actions step, training, evaluation, files."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -7,15 +8,22 @@ import pytest
 import torch
 from matplotlib.figure import Figure
 
+from pipeline.config import LstmParams
+from pipeline.data.shards import RolloutError
 from pipeline.data.windows import Windows, make_windows, split_episodes
+from pipeline.worldmodel.fit import fit_lstm
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.training import (
+    NonFiniteTrainingError,
     evaluate_lstm,
     load_lstm,
     plot_latent_predictions,
     save_lstm,
+    save_vae,
     train_lstm,
 )
+from pipeline.worldmodel.vae import VAE
+from tests.data.test_shards import make_episodes, write_dataset
 
 LATENT = 4
 # Action-dependent drift of the synthetic latent dynamics: z_{t+1} = z_t + DRIFT[a_t].
@@ -160,3 +168,50 @@ def test_save_load_round_trip_and_figure(tmp_path: Path) -> None:
     assert isinstance(figure, Figure) and len(figure.axes) == 2
     figure.savefig(tmp_path / "latents.png")
     assert (tmp_path / "latents.png").stat().st_size > 0
+
+
+def test_exploding_learning_rate_stops_the_training_with_one_line() -> None:
+    train, val = synthetic_windows()
+    epochs: list[int] = []
+    with pytest.raises(NonFiniteTrainingError) as error:
+        train_lstm(
+            train,
+            val,
+            hidden_dim=16,
+            learning_rate=1e30,
+            batch_size=32,
+            max_epochs=5,
+            patience=5,
+            seed=0,
+            device="cpu",
+            on_epoch=lambda epoch, _: epochs.append(epoch),
+        )
+    message = str(error.value)
+    assert "\n" not in message
+    assert re.fullmatch(
+        r"LSTM training stopped: training loss became (nan|inf) at epoch 1 \(batch \d+\); "
+        r"no model was written",
+        message,
+    )
+    assert epochs == []
+
+
+def test_non_finite_validation_loss_stops_the_training() -> None:
+    train, val = synthetic_windows()
+    val.targets[0, 0, 0] = float("inf")
+    with pytest.raises(NonFiniteTrainingError) as error:
+        train_small(train, val, max_epochs=3)
+    assert str(error.value) == (
+        "LSTM training stopped: validation loss became inf at epoch 1; no model was written"
+    )
+
+
+def test_fit_lstm_refuses_a_shard_with_a_nan_next_observation(tmp_path: Path) -> None:
+    episodes = make_episodes(0, [30, 30])
+    episodes["next_obs"][12, 3] = np.nan
+    (path,) = write_dataset(tmp_path / "rollouts", [episodes], max_rows=100)
+    vae = tmp_path / "vae.pt"
+    save_vae(vae, VAE(23, 16, LATENT))
+    with pytest.raises(RolloutError) as error:
+        fit_lstm(tmp_path / "rollouts", vae, LstmParams(max_epochs=1, hidden_dim=16), seed=0)
+    assert str(error.value) == f"{path}: row 12, column next_obs[3]: not finite (nan)"

@@ -1,6 +1,7 @@
 """The VAE: loss formula by hand, built-in standardisation, training, determinism, files."""
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -8,9 +9,14 @@ import pytest
 import torch
 from matplotlib.figure import Figure
 
+from pipeline.config import VaeParams
+from pipeline.data.shards import RolloutError
+from pipeline.worldmodel import training
+from pipeline.worldmodel.fit import fit_vae
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.training import (
     ModelFileError,
+    NonFiniteTrainingError,
     encode_observations,
     load_lstm,
     load_vae,
@@ -20,6 +26,7 @@ from pipeline.worldmodel.training import (
     train_vae,
 )
 from pipeline.worldmodel.vae import VAE, kl_divergence, vae_loss
+from tests.data.test_shards import make_episodes, write_dataset
 
 RADIUS_COLUMN = 6  # human 0's radius: constant in real observations
 
@@ -168,3 +175,95 @@ def test_reconstruction_figure(tmp_path: Path) -> None:
     assert len(figure.axes) == 4
     figure.savefig(tmp_path / "reconstruction.png")
     assert (tmp_path / "reconstruction.png").stat().st_size > 0
+
+
+def _one_line_non_finite(error: pytest.ExceptionInfo[NonFiniteTrainingError]) -> str:
+    message = str(error.value)
+    assert "\n" not in message
+    assert "no model was written" in message
+    return message
+
+
+def test_exploding_learning_rate_stops_the_training_with_one_line() -> None:
+    epochs: list[int] = []
+    with pytest.raises(NonFiniteTrainingError) as error:
+        train_vae(
+            synthetic_observations(500, seed=1),
+            synthetic_observations(100, seed=2),
+            latent_dim=4,
+            hidden_dim=32,
+            kl_weight=1.0,
+            learning_rate=1e30,
+            batch_size=128,
+            max_epochs=5,
+            patience=5,
+            seed=0,
+            device="cpu",
+            on_epoch=lambda epoch, _: epochs.append(epoch),
+        )
+    message = _one_line_non_finite(error)
+    pattern = r"VAE training stopped: training loss became (nan|inf) at epoch 1 \(batch \d+\)"
+    assert re.match(pattern, message)
+    assert epochs == []  # the failing epoch is never reported as a result
+
+
+def test_loss_turning_nan_names_epoch_and_batch(monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = {"n": 0}
+
+    def nan_on_the_seventh_call(*args, **kwargs):
+        total, recon, kl = vae_loss(*args, **kwargs)
+        calls["n"] += 1
+        # 500 rows / 128 = 4 batches, then 1 validation pass, per epoch: epoch 2, batch 2.
+        if calls["n"] == 7:
+            total = total * math.nan
+        return total, recon, kl
+
+    monkeypatch.setattr(training, "vae_loss", nan_on_the_seventh_call)
+    with pytest.raises(NonFiniteTrainingError) as error:
+        _tiny_vae_training()
+    assert _one_line_non_finite(error) == (
+        "VAE training stopped: training loss became nan at epoch 2 (batch 2); no model was written"
+    )
+
+
+def test_weights_turning_nan_stop_the_training(monkeypatch: pytest.MonkeyPatch) -> None:
+    step = torch.optim.Adam.step
+    calls = {"n": 0}
+
+    def poisoning_step(self, *args, **kwargs):
+        result = step(self, *args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] == 8:  # the last batch of epoch 2
+            with torch.no_grad():
+                self.param_groups[0]["params"][0].view(-1)[0] = math.nan
+        return result
+
+    monkeypatch.setattr(torch.optim.Adam, "step", poisoning_step)
+    with pytest.raises(NonFiniteTrainingError, match="non-finite at epoch 2;") as error:
+        _tiny_vae_training()
+    _one_line_non_finite(error)
+
+
+def _tiny_vae_training():
+    return train_vae(
+        synthetic_observations(500, seed=1),
+        synthetic_observations(100, seed=2),
+        latent_dim=4,
+        hidden_dim=32,
+        kl_weight=1.0,
+        learning_rate=1e-3,
+        batch_size=128,
+        max_epochs=3,
+        patience=5,
+        seed=0,
+        device="cpu",
+    )
+
+
+def test_fit_vae_refuses_a_shard_with_a_nan_observation(tmp_path: Path) -> None:
+    episodes = make_episodes(0, [30, 30, 30, 30])
+    episodes["obs"][64, 5] = np.nan
+    paths = write_dataset(tmp_path, [episodes], max_rows=60)
+    with pytest.raises(RolloutError) as error:
+        fit_vae(tmp_path, VaeParams(max_epochs=1, hidden_dim=16, latent_dim=4), seed=0)
+    assert str(error.value) == f"{paths[1]}: row 4, column obs[5]: not finite (nan)"
