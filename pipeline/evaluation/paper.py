@@ -7,7 +7,7 @@ test metrics were computed differently by the authors' scripts than by this proj
 §6): each value says which of our metrics it corresponds to and whether the definitions agree,
 so that the report compares like with like and says so when it cannot.
 
-Nothing here computes anything; :mod:`pipeline.evaluation.report` holds the logic that checks
+Nothing here computes anything; :mod:`pipeline.evaluation.claims` holds the logic that checks
 :data:`CLAIMS` against a run.
 """
 
@@ -213,7 +213,7 @@ class Claim:
         claim_id: short stable key (used in ``metrics/report.json``).
         statement: the claim in words, as the report prints it.
         source: where the paper makes it.
-        kind: how it is checked (see :mod:`pipeline.evaluation.report`):
+        kind: how it is checked (see :mod:`pipeline.evaluation.claims`):
             ``better``: each ``subject`` beats each ``other`` on each metric (paired tests);
             ``best``: the subject beats every other evaluated method on each metric;
             ``pareto``: the subject is Pareto non-dominated over the nine metrics (means);

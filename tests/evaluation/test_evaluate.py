@@ -31,7 +31,13 @@ from pipeline.evaluation.evaluate import (
 )
 from pipeline.evaluation.stats import mean_ci_crossed
 from pipeline.metrics import ALL_METRICS, PAPER_METRICS
-from tests.evaluation.conftest import EPISODES, SCENARIO_SEED, TEST_ENV, save_tiny_agent
+from tests.evaluation.conftest import (
+    EPISODES,
+    SCENARIO_SEED,
+    TEST_ENV,
+    save_tiny_agent,
+    write_evaluation_files,
+)
 
 
 def assert_tables_equal(a: pa.Table, b: pa.Table) -> None:
@@ -127,10 +133,9 @@ def test_evaluation_metadata_names_a_foreign_or_older_file(tmp_path):
 @pytest.mark.parametrize("method", ["orca", "sfm"])
 def test_baseline_evaluation_writes_files_that_round_trip(baseline_results, tmp_path, method):
     result = baseline_results[method]
-    episodes = tmp_path / "data" / "eval" / f"{method}.parquet"
-    trajectories = tmp_path / "data" / "eval" / f"{method}-trajectories.parquet"
-    metrics = tmp_path / "metrics" / "eval" / f"{method}.json"
-    write_evaluation(result, episodes, trajectories, metrics)
+    episodes, trajectories, metrics = write_evaluation_files(
+        result, tmp_path / "data" / "eval", tmp_path / "metrics" / "eval"
+    )
 
     table, metadata = read_evaluation(episodes)
     assert_tables_equal(table, result.episodes)

@@ -16,39 +16,29 @@ from PIL import Image
 from scipy import stats as scipy_stats
 
 from pipeline.evaluation import paper
-from pipeline.evaluation.evaluate import (
-    AGENT_METHODS,
-    BASELINE_SEED,
-    EvaluationResult,
-    write_evaluation,
-)
+from pipeline.evaluation.claims import VERDICTS, check_claims
+from pipeline.evaluation.comparisons import clustered_mcnemar, compare, pareto_analysis
+from pipeline.evaluation.evaluate import AGENT_METHODS, BASELINE_SEED, EvaluationResult
+from pipeline.evaluation.rendering import fmt_ci
 from pipeline.evaluation.report import (
-    VERDICTS,
     MethodEvaluation,
-    _fmt_ci,
     build_report,
-    check_claims,
-    clustered_mcnemar,
-    compare,
     load_evaluations,
     load_training_returns,
-    pareto_analysis,
     training_summary,
 )
 from pipeline.evaluation.stats import mcnemar, mean_ci_crossed, wilcoxon_signed_rank
 from pipeline.metrics import ALL_METRICS, PAPER_METRICS
-from tests.evaluation.conftest import EPISODES, SCENARIO_SEED, TEST_ENV, relabel, set_column
+from tests.evaluation.conftest import (
+    EPISODES,
+    SCENARIO_SEED,
+    TEST_ENV,
+    relabel,
+    set_column,
+    write_evaluation_files,
+)
 
 # ------------------------------------------------------------------ fixtures
-
-
-def _write(result: EvaluationResult, eval_dir: Path, metrics_dir: Path) -> None:
-    write_evaluation(
-        result,
-        eval_dir / f"{result.method}.parquet",
-        eval_dir / f"{result.method}-trajectories.parquet",
-        metrics_dir / f"{result.method}.json",
-    )
 
 
 def _synthetic_dqn(orca: EvaluationResult) -> EvaluationResult:
@@ -84,8 +74,8 @@ def report(baseline_results, tmp_path_factory):
     root = tmp_path_factory.mktemp("report")
     eval_dir, metrics_dir = root / "data" / "eval", root / "metrics" / "eval"
     for result in baseline_results.values():
-        _write(result, eval_dir, metrics_dir)
-    _write(_synthetic_dqn(baseline_results["orca"]), eval_dir, metrics_dir)
+        write_evaluation_files(result, eval_dir, metrics_dir)
+    write_evaluation_files(_synthetic_dqn(baseline_results["orca"]), eval_dir, metrics_dir)
     _training_logs(root / "data" / "training", "dueling-dqn", range(2), 0.5)
     _training_logs(root / "data" / "training", "2stepahead", range(3), 0.6)
     result = build_report(
@@ -187,7 +177,7 @@ def test_summary_numbers_match_the_per_episode_parquet(report):
                 (direct.low, direct.high, direct.n)
             )
             expected = {"mean": direct.mean, "low": direct.low, "high": direct.high}
-            assert row[column] == _fmt_ci(metric, expected), (method, metric)
+            assert row[column] == fmt_ci(metric, expected), (method, metric)
     # Per-seed means of the agent, by hand.
     dqn = pq.read_table(root / "data" / "eval" / "dueling-dqn.parquet")
     seeds = dqn["training_seed"].to_numpy()
@@ -218,7 +208,7 @@ def test_reference_comparisons_pair_agents_with_baselines_by_scenario(report):
 def test_report_with_only_baselines_says_what_is_missing(baseline_results, tmp_path):
     eval_dir = tmp_path / "eval"
     for result in baseline_results.values():
-        _write(result, eval_dir, tmp_path / "m")
+        write_evaluation_files(result, eval_dir, tmp_path / "m")
     result = build_report(
         eval_dir, tmp_path / "no-training", tmp_path / "reports", tmp_path / "report.json",
         gif_scenarios=(0,), gif_size=64, gif_max_frames=5,
@@ -250,9 +240,9 @@ def test_report_without_any_evaluation(tmp_path):
 
 
 def test_evaluations_on_other_scenarios_are_refused(baseline_results, tmp_path):
-    _write(baseline_results["orca"], tmp_path, tmp_path)
+    write_evaluation_files(baseline_results["orca"], tmp_path, tmp_path)
     other = dataclasses.replace(baseline_results["sfm"], scenario_seed=SCENARIO_SEED + 1)
-    _write(other, tmp_path, tmp_path)
+    write_evaluation_files(other, tmp_path, tmp_path)
     with pytest.raises(ValueError, match="other scenarios than orca"):
         load_evaluations(tmp_path)
     with pytest.raises(ValueError, match="another scenario_seed"):

@@ -1,0 +1,439 @@
+"""The report's results turned into text: ``summary.md`` (Markdown tables and prose) and the
+content of ``metrics/report.json``, with the number formats both use (and the claims' evidence).
+
+Nothing here computes a statistic: the numbers come from
+:mod:`~pipeline.evaluation.comparisons`, :mod:`~pipeline.evaluation.claims` and
+:func:`~pipeline.evaluation.evaluate.summarise`; :mod:`~pipeline.evaluation.report` writes the
+files.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pipeline.evaluation import paper
+from pipeline.evaluation.comparisons import PairedComparison
+from pipeline.evaluation.evaluate import BASELINE_SEED, METHODS
+from pipeline.metrics import ALL_METRICS, METRIC_DIRECTIONS, METRIC_UNITS, PAPER_METRICS
+
+if TYPE_CHECKING:
+    from pipeline.evaluation.claims import ClaimResult
+    from pipeline.evaluation.report import MethodEvaluation
+
+__all__ = ["fmt_ci", "fmt_p", "fmt_value", "render_summary", "report_content"]
+
+
+# --------------------------------------------------------------------------------------------
+# Formats
+# --------------------------------------------------------------------------------------------
+
+
+def fmt_value(metric: str, value: float) -> str:
+    """A metric value as the report prints it: rates in %, others to 2–3 significant places."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "–"
+    if math.isinf(value):
+        return "∞" if value > 0 else "−∞"
+    if METRIC_UNITS.get(metric) == "0/1" or metric == paper.ANY_COLLISION:
+        return f"{100.0 * value:.1f}%"
+    if abs(value) >= 100:
+        return f"{value:.0f}"
+    if abs(value) >= 10:
+        return f"{value:.1f}"
+    return f"{value:.3f}" if abs(value) < 1 else f"{value:.2f}"
+
+
+def fmt_ci(metric: str, entry: Mapping[str, float]) -> str:
+    """A ``{"mean", "low", "high"}`` entry as ``mean [low, high]`` (the mean alone without one)."""
+    mean = fmt_value(metric, entry["mean"])
+    if not (math.isfinite(entry["low"]) and math.isfinite(entry["high"])):
+        return mean
+    return f"{mean} [{fmt_value(metric, entry['low'])}, {fmt_value(metric, entry['high'])}]"
+
+
+def fmt_p(p: float) -> str:
+    """A p-value to two significant digits, ``<0.001`` below that, ``–`` when undefined."""
+    if not math.isfinite(p):
+        return "–"
+    return f"{p:.2g}" if p >= 0.001 else "<0.001"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return lines
+
+
+def _direction_mark(metric: str) -> str:
+    return "↑" if METRIC_DIRECTIONS[metric] == "max" else "↓"
+
+
+def _fmt_difference(c: PairedComparison) -> str:
+    def signed(x: float) -> str:
+        text = fmt_value(c.metric, x)
+        return text if text.startswith(("-", "−", "–")) else f"+{text}"
+
+    if not (math.isfinite(c.low) and math.isfinite(c.high)):
+        return signed(c.difference)
+    return f"{signed(c.difference)} [{fmt_value(c.metric, c.low)}, {fmt_value(c.metric, c.high)}]"
+
+
+# --------------------------------------------------------------------------------------------
+# metrics/report.json
+# --------------------------------------------------------------------------------------------
+
+
+def report_content(
+    *,
+    evaluations: Mapping[str, MethodEvaluation],
+    absent: Sequence[str],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]],
+    any_collision: Mapping[str, Mapping[str, float]],
+    comparisons: Sequence[PairedComparison],
+    reference: str,
+    pareto: Mapping[str, Any],
+    claims: Sequence[ClaimResult],
+    training: Mapping[str, Mapping[str, Any]],
+    scenario_seed: int | None,
+    num_scenarios: int,
+    smoothing_window: int,
+    alpha: float,
+) -> dict[str, Any]:
+    """The content of ``metrics/report.json``: means, intervals, p-values, Pareto set, verdicts."""
+    present = list(evaluations)
+    content: dict[str, Any] = {
+        "scenario_seed": scenario_seed,
+        "episodes": num_scenarios,
+        "reference": reference,
+        "alpha": alpha,
+        "methods_present": present,
+        "methods_absent": absent,
+        "methods": {
+            m: {
+                "training_seeds": evaluations[m].training_seeds,
+                "metrics": summaries[m],
+                "any_collision": any_collision[m],
+                **(
+                    {"per_seed": {f"seed-{s}": v for s, v in per_seed[m].items()}}
+                    if m in per_seed
+                    else {}
+                ),
+            }
+            for m in present
+        },
+        "comparisons": {},
+        "pareto": pareto,
+        # Verdicts only: the checks behind them (lists of dicts, which `dvc metrics show`
+        # cannot tabulate) go to reports/claims.json.
+        "claims": {
+            r.claim.claim_id: {"verdict": r.verdict, "statement": r.claim.statement} for r in claims
+        },
+        "training": {
+            v: {
+                "seeds": t["seeds"],
+                "plateau": {f"seed-{s}": x for s, x in t["plateau"].items()},
+                "episodes_to_solve": {f"seed-{s}": x for s, x in t["episodes_to_solve"].items()},
+                "paper_plateau": paper.TRAINING_TARGETS[v].plateau
+                if v in paper.TRAINING_TARGETS
+                else None,
+            }
+            for v, t in training.items()
+        },
+        "smoothing_window": smoothing_window,
+    }
+    for c in comparisons:
+        entry = {k: v for k, v in asdict(c).items() if k not in ("method", "other", "metric")}
+        entry["verdict"] = c.verdict(alpha)
+        content["comparisons"].setdefault(c.method, {})[c.metric] = entry
+    return content
+
+
+# --------------------------------------------------------------------------------------------
+# summary.md
+# --------------------------------------------------------------------------------------------
+
+
+def render_summary(
+    *,
+    evaluations: Mapping[str, MethodEvaluation],
+    absent: Sequence[str],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]],
+    any_collision: Mapping[str, Mapping[str, float]],
+    comparisons: Sequence[PairedComparison],
+    reference: str,
+    pareto: Mapping[str, Any],
+    claims: Sequence[ClaimResult],
+    training: Mapping[str, Mapping[str, Any]],
+    figure_paths: Sequence[Path],
+    figure_notes: Sequence[str],
+    out_dir: Path,
+    scenario_seed: int | None,
+    num_scenarios: int,
+    smoothing_window: int,
+    alpha: float,
+) -> str:
+    """The text of ``summary.md``: tables, comparisons, Pareto set, the paper, claims, figures."""
+    lines: list[str] = ["# socnav-wm: evaluation report", ""]
+    present = list(evaluations)
+    seeds_text = ", ".join(
+        f"{m} ({len(e.training_seeds)} seed{'s' if len(e.training_seeds) > 1 else ''})"
+        if e.is_agent
+        else m
+        for m, e in evaluations.items()
+    )
+    lines += [
+        f"Test scenarios: {num_scenarios} (scenario seed {scenario_seed}), the same for every "
+        "method. Agents act greedily; every training seed is evaluated. Baselines are "
+        f"deterministic (one run, `training_seed = {BASELINE_SEED}`).",
+        "",
+        f"- Evaluated: {seeds_text or 'none'}.",
+        f"- **Not evaluated: {', '.join(absent)}.**" if absent else "- Not evaluated: none.",
+        "",
+    ]
+    if not present:
+        lines += ["No evaluation file was found: nothing to report.", ""]
+
+    # -- the table -----------------------------------------------------------------------------
+    if present:
+        lines += [
+            "## Test metrics",
+            "",
+            "Mean [95% interval] over scenarios × training seeds (two-way bootstrap: seeds and "
+            "scenarios resampled independently); rates in %. ↑ higher is better, ↓ lower is "
+            "better. Definitions: `pipeline/metrics.py` (the paper's intent, world frame).",
+            "",
+        ]
+        header = ["method", "n"] + [f"{m} {_direction_mark(m)}" for m in PAPER_METRICS]
+        rows = [
+            [m, str(summaries[m]["success"]["n"])]
+            + [fmt_ci(k, summaries[m][k]) for k in PAPER_METRICS]
+            for m in present
+        ]
+        lines += _table(header, rows) + [""]
+        extra = [k for k in ALL_METRICS if k not in PAPER_METRICS]
+        lines += ["Further metrics:", ""]
+        header = ["method"] + [f"{m} {_direction_mark(m)}" for m in extra]
+        rows = [[m] + [fmt_ci(k, summaries[m][k]) for k in extra] for m in present]
+        lines += _table(header, rows) + [""]
+        lines += [
+            "`time_to_reach_goal` is over successful episodes only; "
+            "`personal_space_compliance_code` is the original code's definition (centre "
+            "distance ≥ 2.02 m).",
+            "",
+        ]
+        if per_seed:
+            lines += [
+                "### Per training seed",
+                "",
+                "With a handful of seeds the interval's seed component is estimated poorly: "
+                "here is the spread itself.",
+                "",
+            ]
+            header = ["method", "seed"] + list(PAPER_METRICS)
+            rows = [
+                [m, str(s)] + [fmt_value(k, v[k]) for k in PAPER_METRICS]
+                for m, seeds in per_seed.items()
+                for s, v in seeds.items()
+            ]
+            lines += _table(header, rows) + [""]
+
+    # -- paired comparisons --------------------------------------------------------------------
+    lines += ["## Paired comparisons with " + f"`{reference}`", ""]
+    if reference not in evaluations:
+        lines += [f"`{reference}` was not evaluated: no paired comparisons.", ""]
+    elif not comparisons:
+        lines += ["No other method was evaluated.", ""]
+    else:
+        lines += [
+            "Same scenarios, paired scenario by scenario (same seeds: seed s, scenario i "
+            "against seed s, scenario i; agent vs baseline: every seed's run against the "
+            "baseline's). The scenario is the independent unit: McNemar (clustered McNemar, "
+            "Durkalski et al. 2003, when a scenario holds several pairs) for 0/1 metrics, "
+            "Wilcoxon signed-rank on per-scenario means otherwise. Difference = method − "
+            f"reference with a 95% interval; Holm over all {len(comparisons)} comparisons; "
+            f"verdict at α = {alpha}.",
+            "",
+        ]
+        header = [
+            "method",
+            "metric",
+            "test",
+            "pairs (scenarios)",
+            "difference [95%]",
+            "effect",
+            "p",
+            "Holm p",
+            "verdict",
+        ]
+        rows = []
+        for c in comparisons:
+            if c.num_pairs == 0:
+                rows.append([c.method, c.metric, "–", "0", "–", "–", "–", "–", "no pairs"])
+                continue
+            effect = (
+                f"{c.effect_size:+.3f} (r)"
+                if c.effect_name.startswith("rank")
+                else f"{100 * c.effect_size:+.1f} pp"
+            )
+            rows.append(
+                [
+                    c.method,
+                    c.metric,
+                    c.test,
+                    f"{c.num_pairs} ({c.num_scenarios})",
+                    _fmt_difference(c),
+                    effect,
+                    fmt_p(c.p_value),
+                    fmt_p(c.p_holm),
+                    c.verdict(alpha),
+                ]
+            )
+        lines += _table(header, rows) + [""]
+
+    # -- Pareto --------------------------------------------------------------------------------
+    lines += ["## Pareto analysis", ""]
+    if present:
+        metrics_text = ", ".join(f"{m} {_direction_mark(m)}" for m in pareto["metrics"])
+        lines += [
+            f"Over the means of: {metrics_text} (directions declared in "
+            "`pipeline.metrics.METRIC_DIRECTIONS`). No statistical test: a method is dominated "
+            "when another is at least as good on every metric and better on one.",
+            "",
+            f"- Non-dominated: **{', '.join(pareto['front'])}**",
+        ]
+        for method, winners in pareto["dominated_by"].items():
+            lines.append(f"- {method} is dominated by {', '.join(winners)}")
+        if pareto["dropped_metrics"]:
+            lines.append(f"- Left out (undefined mean): {', '.join(pareto['dropped_metrics'])}")
+        lines.append("")
+    else:
+        lines += ["No method evaluated.", ""]
+
+    # -- the paper -----------------------------------------------------------------------------
+    lines += _paper_section(evaluations, summaries, any_collision, training, smoothing_window)
+    lines += ["## The paper's claims, checked", ""]
+    lines += [
+        'Each claim is split into checks ("A beats B on a metric"), Holm-adjusted within the '
+        f"claim (α = {alpha}). A claim is reproduced when all its testable checks are "
+        "significant in the paper's direction, not reproduced when one is significant the "
+        "other way; _inconclusive_ means no significant difference either way. Training "
+        "claims compare per-seed values (Mann–Whitney): with fewer than 4–5 seeds a side "
+        "they cannot be decided. Verdicts are computed from this run's data.",
+        "",
+    ]
+    for result in claims:
+        note = f" ({result.note})" if result.note else ""
+        lines.append(
+            f"- **{result.verdict.upper()}**{note} — {result.claim.statement} "
+            f"[{result.claim.source}]"
+        )
+        for check in result.checks:
+            lines.append(
+                f"  - {check.status}: {check.subject} vs {check.other}, "
+                f"{check.metric}: {check.evidence}"
+            )
+    lines += ["", f"> {paper.BASELINE_NOTE}", ""]
+
+    # -- figures -------------------------------------------------------------------------------
+    lines += ["## Figures", ""]
+    captions = {
+        "training_curves.png": "Training return per episode, trailing rolling mean of "
+        f"{smoothing_window} episodes; line = mean over seeds, band = min–max over seeds "
+        "(the paper's Fig. 6).",
+        "histograms.png": "Distribution of each metric over test episodes, methods side by "
+        "side; fraction of each method's episodes (the paper's Figs. 7–8).",
+        "means.png": "Means and 95% intervals of the table.",
+        "scenarios.gif": "The same test scenarios played by every method (agents: lowest "
+        "training seed), rebuilt from the recorded trajectories.",
+    }
+    for path in figure_paths:
+        relative = path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else path
+        lines += [f"![{path.name}]({relative})", "", captions.get(path.name, ""), ""]
+    for note in figure_notes:
+        lines.append(f"- {note}")
+    if figure_notes:
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _paper_section(
+    evaluations: Mapping[str, MethodEvaluation],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    any_collision: Mapping[str, Mapping[str, float]],
+    training: Mapping[str, Mapping[str, Any]],
+    smoothing_window: int,
+) -> list[str]:
+    lines = [
+        "## Side by side with the paper",
+        "",
+        "Paper values read from the UKCI 2023 figures (paper_spec §7): rates ±0.6 pp (±3 "
+        'episodes of 500), means ±half a histogram bin. "comparable" says whether the '
+        "paper's scripts measured the same thing as ours.",
+        "",
+    ]
+    header = ["method", "metric", "paper", "this run [95%]", "comparable", "note"]
+    rows = []
+    for method in METHODS:
+        if method not in evaluations or method not in paper.TEST_TARGETS:
+            continue
+        for label, target in paper.TEST_TARGETS[method].items():
+            ours = (
+                any_collision[method]
+                if target.our_metric == paper.ANY_COLLISION
+                else summaries[method][target.our_metric]
+            )
+            uncertainty = (
+                f" ± {fmt_value(target.our_metric, target.uncertainty)}"
+                if target.uncertainty
+                else ""
+            )
+            rows.append(
+                [
+                    f"{method} ({paper.PAPER_METHOD_NAMES[method]})",
+                    label,
+                    fmt_value(target.our_metric, target.value) + uncertainty,
+                    fmt_ci(target.our_metric, ours),
+                    "yes" if target.comparable else "no",
+                    target.note,
+                ]
+            )
+    if rows:
+        lines += _table(header, rows) + [""]
+    else:
+        lines += ["No evaluated method to compare.", ""]
+    if training:
+        lines += [
+            "Training (final smoothed return = mean return of the last "
+            f"{smoothing_window} episodes; the paper trained up to 180k episodes, its window is "
+            "unknown):",
+            "",
+        ]
+        header = ["variant", "paper plateau", "this run: mean [min, max] over seeds", "seeds",
+                  "episodes", "episodes to solve"]  # fmt: skip
+        rows = []
+        for variant, entry in training.items():
+            plateaus = [v for v in entry["plateau"].values() if v is not None]
+            solved = ["never" if v is None else str(v) for v in entry["episodes_to_solve"].values()]
+            target = paper.TRAINING_TARGETS.get(variant)
+            rows.append(
+                [
+                    variant,
+                    f"{target.plateau:.2f}" if target else "–",
+                    f"{np.mean(plateaus):.3f} [{min(plateaus):.3f}, {max(plateaus):.3f}]"
+                    if plateaus
+                    else "–",
+                    str(len(entry["seeds"])),
+                    ", ".join(str(e) for e in entry["episodes"].values()),
+                    ", ".join(solved),
+                ]
+            )
+        lines += _table(header, rows) + [""]
+    return lines
