@@ -9,7 +9,6 @@ given, as a training does.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import time
 import tracemalloc
@@ -45,7 +44,9 @@ def one_core() -> Iterator[str]:
 def _rate(
     step: Callable[[], int], seconds: float, synchronize: Callable[[], None] | None = None
 ) -> float:
-    """Items per second of ``step`` (which returns how many items it did) over ``seconds``.
+    """Items per CPU-second of this process (``time.process_time``: every thread's CPU time,
+    so neighbours on a shared machine do not change it) of ``step``, which returns how many
+    items it did, over ``seconds`` CPU-seconds.
 
     ``synchronize`` (``torch.cuda.synchronize`` on a GPU) waits for the work ``step`` queued,
     before the clock starts and before it stops.
@@ -53,14 +54,14 @@ def _rate(
     if synchronize is not None:
         synchronize()
     done = 0
-    start = time.perf_counter()
+    start = time.process_time()
     while True:
         done += step()
-        elapsed = time.perf_counter() - start
+        elapsed = time.process_time() - start
         if elapsed >= seconds:
             if synchronize is not None:
                 synchronize()
-                elapsed = time.perf_counter() - start
+                elapsed = time.process_time() - start
             return done / elapsed
 
 
@@ -141,7 +142,7 @@ def bench_env(
                     "humans": policy,
                     "batch": n,
                     "interface": "gym.make" if n == 1 else "gym.make_vec",
-                    "steps_per_s": rate,
+                    "steps_per_cpu_s": rate,
                     "peak_mb": _peak_bytes(lifecycle) / 2**20,
                 }
             )
@@ -151,7 +152,8 @@ def bench_env(
 def bench_collect(
     episodes: int = 2000, num_envs: tuple[int, ...] = (256, 512), seed: int = 0
 ) -> list[dict[str, Any]]:
-    """End-to-end speed of the collect stage: simulation, buffering and Parquet writing."""
+    """End-to-end speed of the collect stage (simulation, buffering and Parquet writing), per
+    CPU-second of this process."""
     import tempfile
     from pathlib import Path
 
@@ -167,18 +169,20 @@ def bench_collect(
         )  # fmt: skip
         for n in num_envs:
             out = Path(tmp) / f"n{n}"
+            cpu_start = time.process_time()
             summary = collect_rollouts(
                 EnvParams(), episodes=episodes, num_envs=n, seed=seed, out_dir=out,
                 max_rows_per_shard=400_000,
             )  # fmt: skip
+            cpu_seconds = time.process_time() - cpu_start
             size = sum(path.stat().st_size for path in summary.shards)
             rows.append(
                 {
                     "episodes": summary.episodes,
                     "num_envs": n,
                     "steps": summary.steps,
-                    "seconds": summary.seconds,
-                    "steps_per_s": summary.steps / summary.seconds,
+                    "cpu_seconds": cpu_seconds,
+                    "steps_per_cpu_s": summary.steps / cpu_seconds,
                     "parquet_mb": size / 2**20,
                 }
             )
@@ -199,18 +203,21 @@ def bench_train(
     separately, with a random-initialised world model of the given sizes (the paper's by
     default).
 
-    ``params`` is the ``agent`` section the training would use (the variant's preset is applied
+    ``params`` is the ``agent`` section the training would use (``per_variant`` is applied
     here); ``num_envs`` environments are stepped together and each update reads ``batch_size``
     transitions. Returns ``{"variant", "feature_dim", "num_envs", "batch_size",
-    "env_steps_per_s", "updates_per_s"}``. Each rate is measured for ``seconds`` after a short
+    "env_steps_per_cpu_s", "updates_per_cpu_s"}``, per CPU-second of the process. Each rate is
+    measured for ``seconds`` CPU-seconds after a short
     warm-up.
     """
     import torch
 
-    from pipeline.agents.dqn import DQNLearner, step_and_restart, variant_for
+    from pipeline.agents.agent_file import variant_for
     from pipeline.agents.features import VARIANTS
+    from pipeline.agents.learner import DQNLearner
     from pipeline.agents.params import AgentParams, check_variant
     from pipeline.agents.replay import ReplayBuffer
+    from pipeline.agents.training import step_and_restart
     from pipeline.env.core import NUM_ACTIONS, Simulator
     from pipeline.env.params import EnvParams
     from pipeline.worldmodel.lstm import LatentLSTM
@@ -221,8 +228,7 @@ def bench_train(
     env_params = env_params or EnvParams()
     p = (params or AgentParams()).resolved(variant)
     num_envs, batch_size = p.num_envs, p.batch_size
-    p = dataclasses.replace(
-        p,
+    p = p.replace(
         learning_starts=batch_size,  # the benchmark calls the update itself
         buffer_size=max(p.buffer_size, num_envs, batch_size),
     )
@@ -271,6 +277,6 @@ def bench_train(
         "feature_dim": features_of.feature_dim,
         "num_envs": num_envs,
         "batch_size": batch_size,
-        "env_steps_per_s": env_rate,
-        "updates_per_s": update_rate,
+        "env_steps_per_cpu_s": env_rate,
+        "updates_per_cpu_s": update_rate,
     }

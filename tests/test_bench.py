@@ -10,5 +10,9 @@ from pipeline.bench import bench_train
 def test_bench_train_reports_both_rates() -> None:
     params = AgentParams(num_envs=8, batch_size=16)
     row = bench_train("2stepahead-maspm", params=params, seconds=0.05)
-    assert (row["feature_dim"], row["num_envs"], row["batch_size"]) == (80, 8, 16)
-    assert row["env_steps_per_s"] > 0 and row["updates_per_s"] > 0
+    assert (row["feature_dim"], row["num_envs"], row["batch_size"]) == (
+        5 * 23,
+        8,
+        16,
+    )  # z and 4 predictions, decoded
+    assert row["env_steps_per_cpu_s"] > 0 and row["updates_per_cpu_s"] > 0

@@ -52,7 +52,7 @@ from typing import Any, ClassVar, NamedTuple
 import numpy as np
 import torch
 
-from pipeline.agents.params import VARIANT_NAMES, check_variant
+from pipeline.agents.params import VARIANT_NAMES, AgentParams, check_variant
 from pipeline.env.core import ACTION_NAMES, NUM_ACTIONS
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.vae import VAE
@@ -98,18 +98,12 @@ class Variant:
 
     Args:
         vae, lstm: the frozen world model (ignored, and may be None, for ``dueling-dqn``).
+        options: the agent's parameters; a variant reads its options from them (``horizon``,
+            ``maspm_hidden_features``, ``carry_imagined``, ``sort_humans``,
+            ``decode_latents``: :class:`~pipeline.agents.params.AgentParams` documents each),
+            so a new option is one field there and its use here.
         obs_dim: size of the raw observation (23 for three humans).
         device: where the world model runs and the features live.
-        horizon: imagined steps of the ``2stepahead`` variants (≥ 1; the paper: 2).
-        hidden_features: ``2stepahead-maspm`` only: feed the per-action LSTM hidden states
-            instead of the predicted latents (the original code's 1040-d input).
-        carry_imagined: ``2stepahead`` only: carry the imagined state to the next real step
-            (the original code's behaviour) instead of the real one.
-        sort_humans: reorder the observation's human blocks nearest first before anything
-            else (see :func:`sort_humans_by_distance`).
-        decode_latents: give the Q-network every latent (``z`` and the predicted ``ẑ``) as the
-            VAE decodes it, in observation units (obs_dim values each), instead of the code
-            itself (see :meth:`shown`); the LSTM hidden states are given as they are.
     """
 
     name: ClassVar[str]
@@ -119,24 +113,20 @@ class Variant:
         self,
         vae: VAE | None = None,
         lstm: LatentLSTM | None = None,
+        options: AgentParams | None = None,
         *,
         obs_dim: int = 23,
         device: torch.device | str = "cpu",
-        horizon: int = 2,
-        hidden_features: bool = False,
-        carry_imagined: bool = False,
-        sort_humans: bool = False,
-        decode_latents: bool = False,
     ) -> None:
-        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
-            raise ValueError(f"horizon: must be an integer >= 1, got {horizon!r}")
+        options = options if options is not None else AgentParams()
+        self.options = options
         self.device = torch.device(device)
         self.obs_dim = int(obs_dim)
-        self.horizon = horizon
-        self.hidden_features = bool(hidden_features)
-        self.carry_imagined = bool(carry_imagined)
-        self.sort_humans = bool(sort_humans)
-        self.decode_latents = bool(decode_latents)
+        self.horizon = options.horizon
+        self.hidden_features = options.maspm_hidden_features
+        self.carry_imagined = options.carry_imagined
+        self.sort_humans = options.sort_humans
+        self.decode_latents = options.decode_latents
         self.vae: VAE | None = None
         self.lstm: LatentLSTM | None = None
         self.latent_dim = 0
@@ -442,25 +432,10 @@ def make_variant(
     name: str,
     vae: VAE | None = None,
     lstm: LatentLSTM | None = None,
+    options: AgentParams | None = None,
     *,
     obs_dim: int = 23,
     device: torch.device | str = "cpu",
-    horizon: int = 2,
-    hidden_features: bool = False,
-    carry_imagined: bool = False,
-    sort_humans: bool = False,
-    decode_latents: bool = False,
 ) -> Variant:
     """Build the variant ``name`` (see :data:`VARIANTS`) around a frozen world model."""
-    cls = VARIANTS[check_variant(name)]
-    return cls(
-        vae,
-        lstm,
-        obs_dim=obs_dim,
-        device=device,
-        horizon=horizon,
-        hidden_features=hidden_features,
-        carry_imagined=carry_imagined,
-        sort_humans=sort_humans,
-        decode_latents=decode_latents,
-    )
+    return VARIANTS[check_variant(name)](vae, lstm, options, obs_dim=obs_dim, device=device)

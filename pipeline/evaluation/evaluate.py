@@ -537,7 +537,7 @@ def evaluate_method(
             raise ValueError(f"method {method!r} is an agent: baseline parameters do not apply")
         if not agent_paths:
             raise ValueError(f"method {method!r} needs agent files (training seed → path)")
-        from pipeline.agents.dqn import env_params_obs_dim, load_agent
+        from pipeline.agents.agent_file import env_params_obs_dim, greedy_episodes, load_agent
 
         seeds = tuple(sorted(int(s) for s in agent_paths))
         settings["agent_files"] = {str(s): str(agent_paths[s]) for s in seeds}
@@ -557,8 +557,9 @@ def evaluate_method(
                     )
                 runs = []
                 for chunk in _chunks(ids, batch_size):
-                    # A fresh policy per batch: it holds the world-model state of its episodes.
-                    runs += run_episodes(env_params, agent.policy(), scenario_seed, chunk)
+                    runs += greedy_episodes(
+                        agent, env_params, seed=scenario_seed, scenario_ids=chunk
+                    )
                     bar.advance(chunk.size)
                 record(seed, runs)
 

@@ -1,10 +1,14 @@
-"""The Dueling Q-network: aggregation by hand, architecture, init, hand-written backward."""
+"""The Dueling Q-network: aggregation by hand, architecture, init, and a module added to it
+runs and trains."""
 
 import pytest
 import torch
 from torch import nn
 
 from pipeline.agents.dueling import DuelingQNetwork, dueling_q_values
+from pipeline.agents.learner import DQNLearner
+from pipeline.agents.params import AgentParams
+from pipeline.agents.replay import Batch
 
 
 def test_dueling_aggregation_by_hand() -> None:
@@ -57,46 +61,28 @@ def test_needs_a_trunk_layer() -> None:
         DuelingQNetwork(4, trunk_sizes=())
 
 
-@pytest.mark.parametrize(("trunk", "stream", "actions"), [((512, 128), 128, 4), ((7,), 5, 3)])
-def test_hand_written_backward_equals_autograd(
-    trunk: tuple[int, ...], stream: int, actions: int
-) -> None:
-    torch.manual_seed(3)
-    net = DuelingQNetwork(11, actions, trunk, stream)
-    features = torch.randn(32, 11)
-    grad_q = torch.randn(32, actions)
+def test_a_module_added_to_the_network_runs_and_trains() -> None:
+    """Insert a LayerNorm into the trunk: the outputs change, and one update moves every one of
+    the network's parameters, the LayerNorm's included (autograd, no hand-written pass)."""
+    torch.manual_seed(0)
+    plain = DuelingQNetwork(6, trunk_sizes=(32,), stream_size=8)
+    with_norm = DuelingQNetwork(6, trunk_sizes=(32,), stream_size=8)
+    with_norm.load_state_dict(plain.state_dict())
+    with_norm.trunk.insert(1, nn.LayerNorm(32))
+    with torch.no_grad():  # a non-trivial affine part, so that it matters in the forward pass
+        with_norm.trunk[1].weight.uniform_(0.5, 1.5)
+        with_norm.trunk[1].bias.uniform_(-0.5, 0.5)
+    x = torch.randn(16, 6)
+    assert not torch.allclose(plain(x), with_norm(x))
 
-    q_values, cache = net.forward_cached(features)
-    (q_values * grad_q).sum().backward()  # d/dQ of this scalar is grad_q
-    expected = {name: param.grad.clone() for name, param in net.named_parameters()}
-    torch.testing.assert_close(q_values, net(features))
-
-    for param in net.parameters():
-        param.grad = torch.full_like(param, 123.0)  # overwritten, not accumulated into
-    with torch.no_grad():
-        _, cache = net.forward_cached(features)
-    net.backward_cached(cache, grad_q)
-    for name, param in net.named_parameters():
-        torch.testing.assert_close(param.grad, expected[name], rtol=1e-5, atol=1e-6, msg=name)
-
-
-def test_forward_without_cache_and_the_head_of_a_cache() -> None:
-    """forward() is forward_cached() without the activations, and the first rows of a cache
-    are the cache of the first rows (the DQN update runs s and s′ in one pass)."""
-    torch.manual_seed(4)
-    net = DuelingQNetwork(9, trunk_sizes=(16, 8), stream_size=6)
-    features = torch.randn(10, 9)
-    with torch.no_grad():
-        q_values, cache = net.forward_cached(features)
-        head_q, head_cache = net.forward_cached(features[:4])
-    assert torch.equal(net(features), q_values)
-    torch.testing.assert_close(q_values[:4], head_q)
-    grad_q = torch.randn(4, 4)
-    grads = []
-    for used in (cache.head(4), head_cache):
-        for param in net.parameters():
-            param.grad = torch.empty_like(param)
-        net.backward_cached(used, grad_q)
-        grads.append([param.grad.clone() for param in net.parameters()])
-    for mine, expected in zip(*grads, strict=True):
-        torch.testing.assert_close(mine, expected)
+    params = AgentParams(batch_size=16, learning_starts=16, grad_clip=0.0, device="cpu")
+    learner = DQNLearner(6, params, torch.device("cpu"), network=with_norm)
+    before = {name: p.detach().clone() for name, p in learner.q_network.named_parameters()}
+    assert "trunk.1.weight" in before and "trunk.1.bias" in before
+    batch = Batch(
+        x, torch.randint(0, 4, (16,)), torch.randn(16), torch.randn(16, 6), torch.zeros(16),
+        torch.full((16,), 0.95),
+    )  # fmt: skip
+    learner.update(batch)
+    for name, param in learner.q_network.named_parameters():
+        assert not torch.equal(param, before[name]), f"{name} did not move"

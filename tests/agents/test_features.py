@@ -11,6 +11,7 @@ from pipeline.agents.features import (
     make_variant,
     sort_humans_by_distance,
 )
+from pipeline.agents.params import AgentParams
 from pipeline.env import EnvParams, Simulator
 from tests.agents.conftest import HIDDEN, LATENT, OBS_DIM, tiny_world_model
 
@@ -30,9 +31,16 @@ def observations(steps: int = 4, seed: int = 0) -> tuple[list[np.ndarray], list[
     return all_obs, all_actions
 
 
-def variant(name: str, **options):
+def options(**changes) -> AgentParams:
+    """The variant options of ``changes``, the rest the paper's (code latents, spawn order)."""
+    if "hidden_features" in changes:
+        changes["maspm_hidden_features"] = changes.pop("hidden_features")
+    return AgentParams(**{"decode_latents": False, "sort_humans": False, **changes})
+
+
+def variant(name: str, **changes):
     vae, lstm = tiny_world_model()
-    return make_variant(name, vae, lstm, obs_dim=OBS_DIM, **options)
+    return make_variant(name, vae, lstm, options(**changes), obs_dim=OBS_DIM)
 
 
 def latents(v, obs: np.ndarray) -> torch.Tensor:
@@ -74,7 +82,7 @@ def test_paper_sizes_with_the_paper_world_model() -> None:
     from pipeline.worldmodel.vae import VAE
 
     vae, lstm = VAE(23, 256, 16), LatentLSTM(16, 4, 256)
-    sizes = {name: make_variant(name, vae, lstm).feature_dim for name in VARIANTS}
+    sizes = {name: make_variant(name, vae, lstm, options()).feature_dim for name in VARIANTS}
     assert sizes == {
         "dueling-dqn": 23,
         "wm-dueling-dqn": 272,
@@ -82,9 +90,13 @@ def test_paper_sizes_with_the_paper_world_model() -> None:
         "maspm": 80,
         "2stepahead-maspm": 80,
     }
-    assert make_variant("2stepahead-maspm", vae, lstm, hidden_features=True).feature_dim == 1040
+    assert (
+        make_variant("2stepahead-maspm", vae, lstm, options(hidden_features=True)).feature_dim
+        == 1040
+    )
     decoded = {
-        name: make_variant(name, vae, lstm, decode_latents=True).feature_dim for name in VARIANTS
+        name: make_variant(name, vae, lstm, options(decode_latents=True)).feature_dim
+        for name in VARIANTS
     }
     assert decoded == {
         "dueling-dqn": 23,
@@ -96,7 +108,7 @@ def test_paper_sizes_with_the_paper_world_model() -> None:
 
 
 def test_dueling_dqn_features_are_the_observation() -> None:
-    v = make_variant("dueling-dqn")
+    v = make_variant("dueling-dqn", options=options())
     obs, actions = observations(1)
     assert torch.equal(v.reset(obs[0]), torch.as_tensor(obs[0]))
     next_features, features = v.step(obs[1], actions[0])
@@ -292,13 +304,15 @@ def test_bad_names_and_options() -> None:
     )
     with pytest.raises(ValueError, match="'maspm' needs the VAE and the LSTM"):
         make_variant("maspm")
-    with pytest.raises(ValueError, match="horizon: must be an integer >= 1"):
+    with pytest.raises(ValueError, match="agent.horizon: must be > 0"):
         variant("2stepahead", horizon=0)
     vae, lstm = tiny_world_model()
     with pytest.raises(ValueError, match="reads 23-d observations"):
-        make_variant("maspm", vae, lstm, obs_dim=9)
+        make_variant("maspm", vae, lstm, options(), obs_dim=9)
     with pytest.raises(RuntimeError, match="reset"):
-        make_variant("dueling-dqn").step(np.zeros((1, 23), np.float32), np.zeros(1, np.int64))
+        make_variant("dueling-dqn", options=options()).step(
+            np.zeros((1, 23), np.float32), np.zeros(1, np.int64)
+        )
 
 
 def test_sort_humans_by_distance_by_hand() -> None:

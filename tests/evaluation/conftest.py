@@ -10,7 +10,7 @@ import pyarrow as pa
 import pytest
 
 from pipeline.env.params import EnvParams
-from pipeline.evaluation.evaluate import EvaluationResult, evaluate_method
+from pipeline.evaluation.evaluate import EvaluationResult, evaluate_method, write_evaluation
 
 # Short episodes (80 steps) so that some time out: every outcome path gets exercised.
 TEST_ENV = EnvParams(max_steps=80)
@@ -27,6 +27,22 @@ def baseline_results() -> dict[str, EvaluationResult]:
         )
         for method in ("orca", "sfm")
     }
+
+
+def write_evaluation_files(
+    result: EvaluationResult, eval_dir: Path, metrics_dir: Path
+) -> tuple[Path, Path, Path]:
+    """Write ``result`` where the pipeline puts it: ``{eval_dir}/{method}.parquet``,
+    ``{eval_dir}/{method}-trajectories.parquet`` and ``{metrics_dir}/{method}.json``.
+
+    Returns:
+        The three paths, in that order.
+    """
+    episodes = eval_dir / f"{result.method}.parquet"
+    trajectories = eval_dir / f"{result.method}-trajectories.parquet"
+    metrics = metrics_dir / f"{result.method}.json"
+    write_evaluation(result, episodes, trajectories, metrics)
+    return episodes, trajectories, metrics
 
 
 def relabel(result: EvaluationResult, method: str, seeds: tuple[int, ...]) -> EvaluationResult:
@@ -77,17 +93,18 @@ def save_tiny_agent(path: Path, variant: str, env_params: EnvParams, seed: int) 
     """
     import torch
 
-    from pipeline.agents.dqn import TrainResult, env_params_obs_dim, save_agent
+    from pipeline.agents.agent_file import env_params_obs_dim, save_agent
     from pipeline.agents.dueling import DuelingQNetwork
     from pipeline.agents.features import VARIANTS, make_variant
     from pipeline.agents.params import AgentParams
+    from pipeline.agents.training import TrainResult
     from tests.agents.conftest import tiny_world_model
 
     vae = lstm = None
     if VARIANTS[variant].needs_world_model:
         vae, lstm = tiny_world_model(seed)
     params = AgentParams(trunk_sizes=(16,), stream_size=8)
-    features = make_variant(variant, vae, lstm, obs_dim=env_params_obs_dim(env_params))
+    features = make_variant(variant, vae, lstm, params, obs_dim=env_params_obs_dim(env_params))
     torch.manual_seed(seed)
     q_network = DuelingQNetwork(features.feature_dim, 4, (16,), 8).eval()
     result = TrainResult(

@@ -1,8 +1,7 @@
-"""The DQN learner: update rule by hand, hyper-parameters, the training loop on the real
-simulator (learning, determinism, resume), agent files, evaluation and the benchmark."""
+"""The DQN learner's update, hyper-parameters, the training loop on the real simulator
+(learning, determinism, resume), agent files and greedy episodes."""
 
 import copy
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -10,21 +9,23 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from pipeline.agents.dqn import (
-    EPISODE_COLUMNS,
+from pipeline.agents.agent_file import (
     AgentFileError,
-    AgentParams,
-    DQNLearner,
     agent_from_result,
-    double_dqn_targets,
-    episodes_to_solve,
-    evaluate_agent,
+    greedy_episodes,
     load_agent,
     save_agent,
+)
+from pipeline.agents.learner import DQNLearner, double_dqn_targets
+from pipeline.agents.params import AgentParams
+from pipeline.agents.replay import Batch
+from pipeline.agents.training import (
+    EPISODE_COLUMNS,
+    episodes_to_solve,
     selection_seed,
     train_agent,
 )
-from pipeline.agents.replay import Batch
+from pipeline.config import load_params
 from pipeline.env import EnvParams
 from pipeline.worldmodel.training import save_vae
 from tests.agents.conftest import tiny_world_model
@@ -43,6 +44,7 @@ TINY = AgentParams(
     stream_size=16,
     epsilon_decay=0.95,
     checkpoint_every=10,
+    select_every=0,
     device="cpu",
 )
 TINY_ENV = EnvParams(room_size=6.0, max_steps=30)
@@ -84,7 +86,7 @@ def test_double_dqn_target_by_hand() -> None:
 
 def test_one_update_takes_a_gradient_step_and_a_polyak_step() -> None:
     torch.manual_seed(0)
-    params = dataclasses.replace(TINY, polyak=0.75, grad_clip=0.0, learning_rate=1e-2)
+    params = TINY.replace(polyak=0.75, grad_clip=0.0, learning_rate=1e-2)
     learner = DQNLearner(3, params, torch.device("cpu"))
     # Make the target differ from the online network so the averaging is visible.
     with torch.no_grad():
@@ -110,14 +112,11 @@ def test_one_update_takes_a_gradient_step_and_a_polyak_step() -> None:
     ("optimizer", "grad_clip", "huber"),
     [("adam", 0.05, False), ("adamw", 0.0, True), ("adam", 100.0, False)],
 )
-def test_flat_update_matches_the_per_layer_textbook_update(
-    optimizer: str, grad_clip: float, huber: bool
-) -> None:
-    """The learner keeps its weights, gradients and target in flat buffers for speed; five
-    updates must give what per-layer Adam, clip_grad_norm_ and Polyak averaging give."""
+def test_update_matches_the_textbook_update(optimizer: str, grad_clip: float, huber: bool) -> None:
+    """Five updates give what a separate network with Adam, clip_grad_norm_ and Polyak
+    averaging written out step by step gives (the learner's options reach its update)."""
     torch.manual_seed(0)
-    params = dataclasses.replace(
-        TINY, optimizer=optimizer, grad_clip=grad_clip, huber=huber, weight_decay=0.01,
+    params = TINY.replace(optimizer=optimizer, grad_clip=grad_clip, huber=huber, weight_decay=0.01,
         learning_rate=1e-2,
     )  # fmt: skip
     learner = DQNLearner(5, params, torch.device("cpu"))
@@ -174,8 +173,8 @@ def test_default_params_are_one_shared_set() -> None:
     assert params.trunk_sizes == (512, 128)
 
 
-def test_paper_preset_reproduces_the_per_variant_table() -> None:
-    paper = AgentParams(preset="paper", episodes=10)
+def test_paper_overlay_reproduces_the_per_variant_table() -> None:
+    paper = load_params("params.yaml", ["agent.episodes=10"], ["configs/paper.yaml"]).agent
     vanilla = paper.resolved("dueling-dqn")
     assert (vanilla.gamma, vanilla.buffer_size, vanilla.polyak) == (0.99, 200_000, 0.995)
     assert (vanilla.optimizer, vanilla.learning_rate, vanilla.grad_clip) == ("adam", 1e-4, 0.5)
@@ -202,16 +201,15 @@ def test_paper_preset_reproduces_the_per_variant_table() -> None:
         ({"gamma": 1.5}, "agent.gamma: must be in [0, 1], got 1.5"),
         ({"episodes": 0}, "agent.episodes: must be > 0, got 0"),
         ({"episodes": 2.5}, "agent.episodes: expected an integer, got 2.5"),
-        ({"num_envs": True}, "agent.num_envs: expected a number, got True"),
+        ({"num_envs": True}, "agent.num_envs: expected an integer, got True"),
         ({"huber": "yes"}, "agent.huber: expected true or false, got 'yes'"),
         ({"polyak": 1.0}, "agent.polyak: must be in [0, 1), got 1.0"),
         ({"learning_rate": float("nan")}, "agent.learning_rate: must be finite, got nan"),
-        ({"preset": "fast"}, "agent.preset: must be one of shared, paper, got 'fast'"),
         ({"optimizer": "sgd"}, "agent.optimizer: must be one of adam, adamw, got 'sgd'"),
         ({"device": "tpu"}, "agent.device: must be one of auto, cpu, cuda, got 'tpu'"),
         ({"epsilon_min": 0.5, "epsilon_start": 0.1}, "agent.epsilon_min: must be <= epsilon_st"),
-        ({"buffer_size": 10}, "agent.buffer_size: must be >= batch_size (64), got 10"),
-        ({"learning_starts": 8}, "agent.learning_starts: must be between batch_size (64)"),
+        ({"buffer_size": 10}, "agent.buffer_size: must be >= batch_size (128), got 10"),
+        ({"learning_starts": 8}, "agent.learning_starts: must be between batch_size (128)"),
         ({"trunk_sizes": ()}, "agent.trunk_sizes: expected a non-empty list of positive"),
         ({"trunk_sizes": (64, 0)}, "agent.trunk_sizes: expected a non-empty list of positive"),
         ({"horizon": 0}, "agent.horizon: must be > 0, got 0"),
@@ -257,10 +255,10 @@ def test_learns_an_easy_navigation_task_quickly() -> None:
     )
     result = train_agent("dueling-dqn", params, EASY_ENV, None, None, seed=0)
     early = np.mean([row["success"] for row in result.episodes[:50]])
-    rows = evaluate_agent(
+    runs = greedy_episodes(
         agent_from_result(result), EASY_ENV, seed=10_000, scenario_ids=np.arange(200)
     )
-    greedy = np.mean([row["success"] for row in rows])
+    greedy = np.mean([run.success for run in runs])
     assert early < 0.6  # mostly random at first
     assert greedy >= 0.85, greedy
 
@@ -297,9 +295,9 @@ def test_same_seed_same_weights(variant: str, world_model_files: tuple[Path, Pat
 
 
 def test_model_selection_keeps_the_best_greedy_weights() -> None:
-    final = train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0)
-    params = dataclasses.replace(TINY, select_every=10, select_episodes=20)
-    result = train_agent("dueling-dqn", params, TINY_ENV, None, None, seed=0)
+    final = train_agent("dueling-dqn", TINY, EASY_ENV, None, None, seed=2)
+    params = TINY.replace(select_every=10, select_episodes=20)
+    result = train_agent("dueling-dqn", params, EASY_ENV, None, None, seed=2)
     # The greedy runs use their own simulator and generators: the training is the same.
     assert without_time(result.episodes) == without_time(final.episodes)
     episodes = [run["episode"] for run in result.selection]
@@ -315,10 +313,10 @@ def test_model_selection_keeps_the_best_greedy_weights() -> None:
     assert result.selected_episode < TINY.episodes
     assert not torch.equal(result.q_network.trunk[0].weight, final.q_network.trunk[0].weight)
     # The kept weights are those that scored best: running them again gives that rate.
-    rows = evaluate_agent(
-        agent_from_result(result), TINY_ENV, seed=selection_seed(0), scenario_ids=np.arange(20)
+    runs = greedy_episodes(
+        agent_from_result(result), EASY_ENV, seed=selection_seed(2), scenario_ids=np.arange(20)
     )
-    assert np.mean([row["success"] for row in rows]) == best
+    assert np.mean([run.success for run in runs]) == best
     assert final.selection == [] and final.selected_episode is None
 
 
@@ -338,7 +336,7 @@ def test_resumed_run_ends_with_the_same_weights(
     tmp_path: Path,
 ) -> None:
     files = world_model_files
-    params = dataclasses.replace(TINY, n_step=n_step, select_every=select_every, select_episodes=20)
+    params = TINY.replace(n_step=n_step, select_every=select_every, select_episodes=20)
     uninterrupted = train_agent(variant, params, TINY_ENV, *files, seed=5)
 
     def interrupt(rows: list[dict]) -> None:
@@ -349,7 +347,7 @@ def test_resumed_run_ends_with_the_same_weights(
     with pytest.raises(Interrupted):
         train_agent(variant, params, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint,
                     on_episodes=interrupt)  # fmt: skip
-    saved = torch.load(checkpoint, weights_only=True)
+    saved = torch.load(checkpoint, weights_only=True)["state"]
     assert 20 <= len(saved["rows"]) < 25
     resumed = train_agent(
         variant, params, TINY_ENV, *files, seed=5, checkpoint_path=checkpoint, resume=True
@@ -370,7 +368,7 @@ def test_resumed_run_ends_with_the_same_weights(
 def test_resume_refuses_another_runs_checkpoint(tmp_path: Path) -> None:
     checkpoint = tmp_path / "run.ckpt"
     train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0, checkpoint_path=checkpoint)
-    other = dataclasses.replace(TINY, gamma=0.9)
+    other = TINY.replace(gamma=0.9)
     with pytest.raises(ValueError) as error:
         train_agent("dueling-dqn", other, TINY_ENV, None, None, seed=0,
                     checkpoint_path=checkpoint, resume=True)  # fmt: skip
@@ -388,11 +386,11 @@ def test_resume_refuses_another_runs_checkpoint(tmp_path: Path) -> None:
 def test_time_limit_truncation_is_bootstrapped_by_default(bootstrap: bool, tmp_path: Path) -> None:
     # Three steps in a big empty room: every episode times out, none terminates.
     env = EnvParams(num_humans=0, max_steps=3, min_goal_distance=3.0)
-    params = dataclasses.replace(TINY, episodes=8, bootstrap_truncation=bootstrap)
+    params = TINY.replace(episodes=8, bootstrap_truncation=bootstrap)
     checkpoint = tmp_path / "run.ckpt"
     result = train_agent("dueling-dqn", params, env, None, None, seed=0, checkpoint_path=checkpoint)
     assert all(row["timeout"] for row in result.episodes)
-    terminals = torch.load(checkpoint, weights_only=True)["replay"]["terminals"]
+    terminals = torch.load(checkpoint, weights_only=True)["state"]["replay"]["terminals"]
     # Every third transition ends an episode: terminal only when timeouts count as terminal.
     assert terminals.sum().item() == (0 if bootstrap else terminals.numel() // 3)
 
@@ -400,11 +398,11 @@ def test_time_limit_truncation_is_bootstrapped_by_default(bootstrap: bool, tmp_p
 def test_progress_reward_is_added_for_learning_only(tmp_path: Path) -> None:
     # No humans (no discomfort) and 3-step episodes that all time out: the env pays 0, 0, −1.
     env = EnvParams(num_humans=0, max_steps=3, min_goal_distance=3.0)
-    params = dataclasses.replace(TINY, episodes=8, progress_reward=2.0)
+    params = TINY.replace(episodes=8, progress_reward=2.0)
     checkpoint = tmp_path / "run.ckpt"
     result = train_agent("dueling-dqn", params, env, None, None, seed=0, checkpoint_path=checkpoint)
     assert all(row["return"] == -1.0 for row in result.episodes)  # logged: the env's return
-    replay = torch.load(checkpoint, weights_only=True)["replay"]
+    replay = torch.load(checkpoint, weights_only=True)["state"]["replay"]
     # dueling-dqn's features are the observation, which starts with the goal in the robot frame.
     progress = replay["features"][:, :2].norm(dim=1) - replay["next_features"][:, :2].norm(dim=1)
     vector_step = torch.arange(replay["rewards"].numel()) // params.num_envs
@@ -432,7 +430,7 @@ def test_train_agent_errors(world_model_files: tuple[Path, Path]) -> None:
 def test_save_load_agent_and_evaluate(
     world_model_files: tuple[Path, Path], tmp_path: Path, decode_latents: bool
 ) -> None:
-    params = dataclasses.replace(TINY, decode_latents=decode_latents)
+    params = TINY.replace(decode_latents=decode_latents)
     result = train_agent("maspm", params, TINY_ENV, *world_model_files, seed=2)
     path = tmp_path / "agents" / "maspm" / "seed-2.pt"
     save_agent(path, result, extra={"note": "test"})
@@ -448,13 +446,13 @@ def test_save_load_agent_and_evaluate(
     assert_same_weights(agent.q_network, result.q_network)
     assert_same_weights(agent.variant.lstm, result.lstm)
     ids = np.arange(7, 19)
-    rows = evaluate_agent(agent, TINY_ENV, seed=99, scenario_ids=ids, batch_size=5)
-    assert [row["scenario_id"] for row in rows] == ids.tolist()
-    for row in rows:
-        assert row["success"] + (row["collision"] != "none") + row["timeout"] == 1
-    # The file alone reproduces the in-memory agent's greedy behaviour.
-    direct = evaluate_agent(agent_from_result(result), TINY_ENV, seed=99, scenario_ids=ids)
-    assert rows == direct
+    runs = greedy_episodes(agent, TINY_ENV, seed=99, scenario_ids=ids, batch_size=5)
+    assert [run.scenario_id for run in runs] == ids.tolist()
+    for run in runs:
+        assert run.success + (run.collision is not None) + run.truncated == 1
+    # The file alone reproduces the in-memory agent's greedy behaviour, whatever the batch.
+    direct = greedy_episodes(agent_from_result(result), TINY_ENV, seed=99, scenario_ids=ids)
+    assert [r.actions.tolist() for r in runs] == [r.actions.tolist() for r in direct]
     features = agent.variant.reset(np.zeros((3, 23), np.float32))
     assert agent.act(features).shape == (3,)
 
