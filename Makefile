@@ -27,8 +27,13 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # dvc runs each stage's `socnav-wm …` command, so the venv's bin goes first on PATH.
-run: $(STAMP)
-	PATH="$(CURDIR)/$(BIN):$$PATH" $(MAKE) repro
+# The last line says how long the whole job took (set-up included).
+run:
+	@start=$$(date +%s); \
+	$(MAKE) $(STAMP) && PATH="$(CURDIR)/$(BIN):$$PATH" $(MAKE) repro; status=$$?; \
+	elapsed=$$(( $$(date +%s) - start )); \
+	echo "make run: exit status $$status after $$((elapsed / 60)) min $$((elapsed % 60)) s"; \
+	exit $$status
 
 # `dvc repro` with the agent trainings in parallel (with whatever `dvc` is on PATH). DVC runs one
 # stage at a time, and the trainings (independent stages, minutes each on one core) are most of
@@ -46,7 +51,7 @@ repro:
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/pytest -n 2 -q
+	$(BIN)/pytest -n 2 -q --durations=15
 
 bench: $(STAMP)
 	$(BIN)/socnav-wm bench env

@@ -315,6 +315,7 @@ def stage_run(
         tags["mlflow.source.git.commit"] = commit
     if os.environ.get("DVC_EXP_NAME"):
         tags["dvc_exp_name"] = os.environ["DVC_EXP_NAME"]
+    tags.update(machine_tags())
     # No user name in containers without an /etc/passwd entry: leave the tag out.
     with contextlib.suppress(KeyError, OSError):
         tags["mlflow.user"] = getpass.getuser()
@@ -337,6 +338,35 @@ def stage_run(
             log.warning("could not mark MLflow run %s %s: %s", run.run_id, status, tracking_exc)
         raise
     client.set_terminated(run.run_id, status="FINISHED")
+
+
+def _cpu_model() -> str:
+    """The CPU's model name (Linux: /proc/cpuinfo), else what the platform module says."""
+    import platform
+
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def machine_tags() -> dict[str, str]:
+    """What a bit-for-bit rerun needs to match: the CPU model, the PyTorch build (with its
+    BLAS/MKL and OpenMP) and the thread count of this process."""
+    import sys
+
+    tags = {"machine.cpu": _cpu_model(), "machine.cores": str(os.cpu_count() or 0)}
+    torch = sys.modules.get("torch")  # only if the stage uses it: never imported here
+    if torch is not None:
+        tags["machine.torch"] = torch.__version__
+        tags["machine.torch_threads"] = str(torch.get_num_threads())
+        with contextlib.suppress(Exception):
+            config = torch.__config__.show()
+            found = re.search(r"BLAS_INFO=(\w+)", config)
+            tags["machine.torch_blas"] = found.group(1) if found else "unknown"
+            tags["machine.torch_parallel"] = torch.__config__.parallel_info().splitlines()[-1]
+    return tags
 
 
 def _experiment_id(client: Any, uri: str) -> str:

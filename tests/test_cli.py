@@ -43,7 +43,7 @@ def test_bench_env_prints_a_table() -> None:
         app, ["bench", "env", "--batch", "1", "--batch", "8", "--humans", "sfm", "--seconds", "0.1"]
     )
     assert result.exit_code == 0, result.output
-    assert "steps_per_s" in result.output and "gym.make_vec" in result.output
+    assert "steps_per_cpu_s" in result.output and "gym.make_vec" in result.output
 
 
 def test_bench_env_rejects_an_unknown_human_policy() -> None:
@@ -55,7 +55,7 @@ def test_bench_env_rejects_an_unknown_human_policy() -> None:
 def test_bench_collect_prints_a_table() -> None:
     result = runner.invoke(app, ["bench", "collect", "--episodes", "16", "--num-envs", "8"])
     assert result.exit_code == 0, result.output
-    assert "steps_per_s" in result.output and "parquet_mb" in result.output
+    assert "steps_per_cpu_s" in result.output and "parquet_mb" in result.output
 
 
 def test_bench_train_reads_the_params_file_and_overrides(tmp_path: Path) -> None:
@@ -69,7 +69,8 @@ def test_bench_train_reads_the_params_file_and_overrides(tmp_path: Path) -> None
         ],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
-    assert "preset shared, decode_latents True" in " ".join(result.output.split())  # title
+    title = " ".join(result.output.split())
+    assert "decode_latents True" in title and "per CPU-second" in title
     row = next(line for line in result.output.splitlines() if "maspm" in line)
     cells = [cell.strip() for cell in row.split("│")[1:-1]]
     # maspm with decoded latents: z and four predictions, 23 values each; 4 envs, batch 16.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -11,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.test_stages import TINY
+from tests.conftest import tiny_params
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -35,7 +36,7 @@ def repo(tmp_path: Path) -> Path:
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / name, target)
     # DVC needs every params section a stage lists to be present in the file.
-    (copy / "params.yaml").write_text(yaml.safe_dump({**TINY, "env": {"num_humans": 3}}))
+    (copy / "params.yaml").write_text(yaml.safe_dump({**tiny_params(), "env": {"num_humans": 3}}))
     git = ["git", "-c", "user.name=test", "-c", "user.email=test@example.com"]
     subprocess.run([*git, "init", "-q"], cwd=copy, check=True)
     subprocess.run([*git, "add", "-A"], cwd=copy, check=True)
@@ -136,3 +137,14 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
     output = _dvc(repo, "repro")
     assert "Running stage 'evaluate@dueling-dqn'" in output and "Running stage 'report'" in output
     assert "Running stage 'train_agent" not in output
+
+    # An edit of the reward makes every stage that can execute it stale: the data, every
+    # training, every evaluation, the baselines' included (their import closure has it).
+    reward = repo / "pipeline/env/reward.py"
+    reward.write_text(reward.read_text() + "# an edit\n")
+    output = _dvc(repo, "status", "--json")
+    stale = set(json.loads(output[output.index("{") : output.rindex("}") + 1]))
+    expected = {"collect", "evaluate_baseline@orca", "evaluate_baseline@sfm"}
+    expected |= {f"train_agent@{v}-{s}" for v, s in runs}
+    expected |= {f"evaluate@{v}" for v in ("dueling-dqn", "2stepahead-maspm")}
+    assert expected <= stale, sorted(expected - stale)

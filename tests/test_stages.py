@@ -13,58 +13,11 @@ import yaml
 from typer.testing import CliRunner
 
 from pipeline.cli import app
+from tests.conftest import tiny_params
 
-TINY = {
-    "seed": 1,
-    "collect": {"episodes": 40, "num_envs": 8, "max_rows_per_shard": 2000},
-    "vae": {
-        "hidden_dim": 32,
-        "kl_weight": 0.1,
-        "learning_rate": 0.003,
-        "max_epochs": 3,
-        "batch_size": 128,
-        "device": "cpu",
-    },
-    "lstm": {
-        "hidden_dim": 32,
-        "seq_len": 8,
-        "learning_rate": 0.005,
-        "max_epochs": 6,
-        "batch_size": 32,
-        "device": "cpu",
-    },
-    "agent": {
-        "episodes": 30,
-        "num_envs": 8,
-        "batch_size": 16,
-        "buffer_size": 2000,
-        "learning_starts": 64,
-        "updates_per_step": 1,
-        "trunk_sizes": [32],
-        "stream_size": 16,
-        "checkpoint_every": 10,
-        "eval_episodes": 8,
-        "select_every": 10,
-        "select_episodes": 4,
-        "solved_window": 10,
-        "solved_success_rate": 0.9,
-        "device": "cpu",
-    },
-    "experiment": {"variants": ["dueling-dqn", "2stepahead-maspm"], "seeds": [0, 1]},
-    "eval": {"episodes": 6, "scenario_seed": 5, "batch_size": 4, "device": "cpu"},
-    "baselines": {"orca": {"safety_margin": 0.2}, "sfm": {}},
-    "report": {"smoothing_window": 5, "gif_scenarios": [0, 1]},
-}
+TINY = tiny_params()
 
 runner = CliRunner()
-
-
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
-    (tmp_path / "params.yaml").write_text(yaml.safe_dump(TINY))
-    return tmp_path
 
 
 def _invoke(*args: str):
@@ -82,6 +35,7 @@ def test_collect_vae_lstm_write_every_output_and_mlflow_runs(workdir: Path) -> N
     assert list((workdir / "data/rollouts").glob("shard-*.parquet"))
     resolved = yaml.safe_load((workdir / "data/rollouts/params.yaml").read_text())
     assert resolved["collect"]["episodes"] == 40 and resolved["seed"] == 1
+    assert set(resolved) == {"seed", "env", "collect"}  # only what collect reads
     for path in ("models/vae.pt", "models/lstm.pt", "models/vae.params.yaml"):
         assert (workdir / path).is_file(), path
     vae = json.loads((workdir / "metrics/vae.json").read_text())
@@ -293,3 +247,23 @@ def test_cuda_without_a_gpu_is_one_line_before_any_run(
         "use auto or cpu"
     )
     assert not (workdir / "mlflow.db").exists()  # no MLflow run was opened
+
+
+def test_stage_functions_run_without_the_cli(tmp_path: Path) -> None:
+    """The stage bodies are library functions: called directly on the params file plus the
+    tiny overlay, they write their outputs where they are told."""
+    from pipeline.config import load_params
+    from pipeline.stages import collect, train_vae
+    from tests.conftest import TINY_OVERLAY
+
+    root = Path(__file__).resolve().parents[1]
+    params = load_params(root / "params.yaml", ["collect.episodes=12"], [TINY_OVERLAY])
+    rollouts, vae = tmp_path / "rollouts", tmp_path / "vae.pt"
+    message = collect.run(params, out=rollouts, metrics=tmp_path / "c.json", tracking=False)
+    assert message.startswith("wrote 12 episodes")
+    train_vae.run(
+        params, rollouts=rollouts, out=vae, metrics=tmp_path / "v.json",
+        history=tmp_path / "h.json", tracking=False,
+    )  # fmt: skip
+    assert vae.is_file() and (tmp_path / "vae.params.yaml").is_file()
+    assert set(yaml.safe_load((tmp_path / "vae.params.yaml").read_text())) == {"seed", "vae"}

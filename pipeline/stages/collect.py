@@ -1,0 +1,45 @@
+"""Stage ``collect``: random-policy rollouts of the simulator into Parquet shards."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.config import Params
+from pipeline.data.collect import collect_rollouts
+from pipeline.io import atomic_path, write_json_atomic
+from pipeline.progress import progress
+from pipeline.stages.common import open_stage, save_stage_params
+
+
+def run(
+    params: Params,
+    *,
+    out: Path = Path("data/rollouts"),
+    metrics: Path = Path("metrics/collect.json"),
+    tracking: bool = True,
+    quiet: bool = True,
+) -> str:
+    c = params.collect
+    with open_stage("collect", "collect", params, tracking=tracking) as run:
+        # The whole directory appears at once: a killed run never leaves a partial dataset.
+        with (
+            atomic_path(out) as staging,
+            progress(c.episodes, "collect", quiet=quiet, unit="episodes") as bar,
+        ):
+            summary = collect_rollouts(
+                params.env,
+                episodes=c.episodes,
+                num_envs=c.num_envs,
+                seed=params.seed,
+                out_dir=staging,
+                max_rows_per_shard=c.max_rows_per_shard,
+                on_episodes=bar.advance,
+            )
+            save_stage_params("collect", params, staging / "params.yaml")
+        write_json_atomic(metrics, summary.as_metrics())
+        run.log_metrics(summary.as_metrics())
+        run.log_artifact(out / "params.yaml")
+    return (
+        f"wrote {summary.episodes} episodes, {summary.steps} steps in {len(summary.shards)} "
+        f"shard(s) to {out} ({summary.steps / summary.seconds:,.0f} steps/s)"
+    )

@@ -1,0 +1,132 @@
+"""Each stage's source dependencies, computed from its imports.
+
+A stage's command runs its module in :mod:`pipeline.stages`; the Python files it can execute
+are that module's import closure within the ``pipeline`` package: every ``import`` statement of
+every file reached (at the top of a module or inside a function alike), and the ``__init__.py``
+of every package on the way. ``dvc.yaml`` lists exactly these files as each stage's deps, and
+``tests/test_dvc_deps.py`` fails when the two disagree; ``socnav-wm deps`` prints the lists.
+
+Two modules are deliberately not dependencies, nor followed: ``pipeline/cli.py`` (it parses
+options and calls a stage function, and listing it would rerun every stage on an edit of any
+command) and ``pipeline/tracking.py`` (it writes to MLflow, never to a stage's outputs).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+"""The ``pipeline`` package directory."""
+
+STAGE_MODULES: dict[str, str] = {
+    "collect": "pipeline.stages.collect",
+    "train_vae": "pipeline.stages.train_vae",
+    "train_lstm": "pipeline.stages.train_lstm",
+    "train_agent": "pipeline.stages.train_agent",
+    "evaluate": "pipeline.stages.evaluate",
+    "evaluate_baseline": "pipeline.stages.evaluate",
+    "report": "pipeline.stages.report",
+}
+"""``dvc.yaml`` stage name → the module its command runs."""
+
+NOT_DEPENDENCIES = frozenset({"pipeline.cli", "pipeline.tracking"})
+
+
+def _file_of(module: str) -> Path | None:
+    """The source file of ``pipeline…`` module ``module`` (None if there is none)."""
+    parts = module.split(".")
+    if parts[0] != "pipeline":
+        return None
+    base = PACKAGE_ROOT.joinpath(*parts[1:])
+    if (base / "__init__.py").is_file():
+        return base / "__init__.py"
+    if base.with_suffix(".py").is_file():
+        return base.with_suffix(".py")
+    return None
+
+
+def _imported_modules(path: Path, module: str) -> set[str]:
+    """Every module ``path`` (the file of ``module``) imports, absolute, as dotted names; for
+    ``from package import name``, also ``package.name`` (which may be a submodule)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    is_package = path.name == "__init__.py"
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: resolve against this module's package
+                package = module.split(".")
+                package = package if is_package else package[:-1]
+                package = package[: len(package) - (node.level - 1)]
+                base = ".".join(package + ([node.module] if node.module else []))
+            else:
+                base = node.module or ""
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return found
+
+
+def _with_parents(module: str) -> list[str]:
+    """``a.b.c`` → ``a``, ``a.b``, ``a.b.c``: importing a module runs its packages first."""
+    parts = module.split(".")
+    return [".".join(parts[: i + 1]) for i in range(len(parts))]
+
+
+def import_closure(module: str) -> list[str]:
+    """The repository-relative paths of the ``pipeline`` files that ``module`` can execute."""
+    seen: set[str] = set()
+    files: set[Path] = set()
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        for current in _with_parents(name):
+            if current in seen or current in NOT_DEPENDENCIES:
+                continue
+            seen.add(current)
+            path = _file_of(current)
+            if path is None:
+                continue
+            files.add(path)
+            todo.extend(m for m in _imported_modules(path, current) if m.startswith("pipeline"))
+    root = PACKAGE_ROOT.parent
+    return sorted(path.relative_to(root).as_posix() for path in files)
+
+
+def stage_dependencies() -> dict[str, list[str]]:
+    """Stage name → the source files it depends on (:func:`import_closure` of its module)."""
+    return {stage: import_closure(module) for stage, module in STAGE_MODULES.items()}
+
+
+def _stage_definitions(dvc_yaml: dict) -> dict[str, dict]:
+    """Stage name → its definition (the ``do:`` body of a ``foreach``)."""
+    stages = {}
+    for name, body in (dvc_yaml.get("stages") or {}).items():
+        stages[name] = body.get("do", body) if "foreach" in body else body
+    return stages
+
+
+def dvc_yaml_differences(path: str | Path = "dvc.yaml") -> list[str]:
+    """One line per stage whose ``pipeline/`` deps in ``dvc.yaml`` are not exactly its import
+    closure (empty when they all agree)."""
+    import yaml
+
+    definitions = _stage_definitions(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
+    problems = []
+    for stage, expected in stage_dependencies().items():
+        if stage not in definitions:
+            problems.append(f"{path}: no stage {stage!r}")
+            continue
+        listed = {
+            dep
+            for dep in definitions[stage].get("deps") or []
+            if isinstance(dep, str) and dep.startswith("pipeline")
+        }
+        missing, extra = sorted(set(expected) - listed), sorted(listed - set(expected))
+        if missing or extra:
+            problems.append(
+                f"{path}: stage {stage}: missing {', '.join(missing) or 'nothing'}; "
+                f"not executed {', '.join(extra) or 'nothing'}"
+            )
+    return problems

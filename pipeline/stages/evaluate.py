@@ -1,0 +1,77 @@
+"""Stages ``evaluate`` and ``evaluate_baseline``: one method, greedily, on the test scenarios
+(every training seed of an agent, ``experiment.seeds``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.config import Params
+from pipeline.evaluation.evaluate import (
+    AGENT_METHODS,
+    BASELINE_METHODS,
+    METHODS,
+    evaluate_method,
+    evaluation_metrics,
+    write_evaluation,
+)
+from pipeline.stages.common import open_stage
+
+
+def run(
+    params: Params,
+    *,
+    method: str,
+    agents_dir: Path = Path("models/agents"),
+    out_dir: Path = Path("data/eval"),
+    metrics_dir: Path = Path("metrics/eval"),
+    tracking: bool = True,
+    quiet: bool = True,
+) -> str:
+    if method not in METHODS:
+        raise ValueError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
+    stage = "evaluate_baseline" if method in BASELINE_METHODS else "evaluate"
+    with open_stage(stage, f"evaluate/{method}", params, tracking=tracking) as run:
+        agent_paths = None
+        if method in AGENT_METHODS:
+            agent_paths = {s: agents_dir / method / f"seed-{s}.pt" for s in params.experiment.seeds}
+            for s, path in agent_paths.items():
+                if not path.is_file():
+                    raise FileNotFoundError(
+                        f"{path}: no such agent file (train it: socnav-wm train-agent "
+                        f"--variant {method} --seed {s})"
+                    )
+        overrides_of = None
+        if method in BASELINE_METHODS:
+            overrides_of = getattr(params.baselines, method).model_dump()
+        result = evaluate_method(
+            method,
+            env_params=params.env,
+            scenario_seed=params.eval.scenario_seed,
+            episodes=params.eval.episodes,
+            agent_paths=agent_paths,
+            baseline_overrides=overrides_of,
+            device=params.eval.device,
+            batch_size=params.eval.batch_size,
+            quiet=quiet,
+        )
+        episodes_path = out_dir / f"{method}.parquet"
+        metrics_path = metrics_dir / f"{method}.json"
+        write_evaluation(
+            result, episodes_path, out_dir / f"{method}-trajectories.parquet", metrics_path
+        )
+        content = evaluation_metrics(result)
+        run.set_tag("method", method)
+        run.log_params({"method": method})
+        run.log_metrics({m: v["mean"] for m, v in content["metrics"].items()})
+        run.log_metrics({f"{m}_ci_low": v["low"] for m, v in content["metrics"].items()})
+        run.log_metrics({f"{m}_ci_high": v["high"] for m, v in content["metrics"].items()})
+        run.log_metrics({"wall_time_s": result.wall_time})
+        for seed_name, means in content.get("per_seed", {}).items():  # e.g. seed-0.success
+            run.log_metrics({f"{seed_name}.{m}": v for m, v in means.items() if v == v})
+        run.log_artifact(metrics_path)
+    success = content["metrics"]["success"]
+    return (
+        f"wrote {episodes_path}: {method} success {success['mean']:.1%} "
+        f"[{success['low']:.1%}, {success['high']:.1%}] over {result.num_scenarios} scenarios "
+        f"x {len(result.training_seeds)} seed(s) in {result.wall_time:.0f} s"
+    )

@@ -1,0 +1,43 @@
+"""Stage ``report``: table, paired tests, Pareto set, figures and the paper's claims checked."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.config import Params
+from pipeline.evaluation.report import build_report
+from pipeline.stages.common import open_stage
+
+
+def run(
+    params: Params,
+    *,
+    eval_dir: Path = Path("data/eval"),
+    training_dir: Path = Path("data/training"),
+    out_dir: Path = Path("reports"),
+    metrics: Path = Path("metrics/report.json"),
+    tracking: bool = True,
+) -> str:
+    r = params.report
+    with open_stage("report", "report", params, tracking=tracking) as run:
+        result = build_report(
+            eval_dir,
+            training_dir,
+            out_dir,
+            metrics,
+            env_params=params.env,
+            scenario_seed=params.eval.scenario_seed,
+            reference=r.reference,
+            gif_scenarios=tuple(r.gif_scenarios),
+            smoothing_window=r.smoothing_window,
+            solved_window=params.agent.solved_window,
+            solved_success_rate=params.agent.solved_success_rate,
+            alpha=r.alpha,
+        )
+        for claim, verdict in result.verdicts.items():
+            run.set_tag(f"claim.{claim}", verdict)
+        run.set_tag("methods", ",".join(result.present))
+        for path in (result.summary_path, result.pareto_path, result.claims_path, *result.figures):
+            run.log_artifact(path, "figures" if path in result.figures else None)
+    missing = f"; missing: {', '.join(result.absent)}" if result.absent else ""
+    return f"wrote {result.summary_path} ({len(result.present)} methods{missing})"

@@ -1,0 +1,48 @@
+"""Stage ``train_lstm``: the LSTM world model on VAE latents of the rollouts (VAE frozen)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pipeline.config import Params
+from pipeline.progress import progress
+from pipeline.stages.common import epoch_logger, open_stage, world_model_outputs
+from pipeline.worldmodel.fit import fit_lstm
+from pipeline.worldmodel.training import save_lstm
+
+
+def run(
+    params: Params,
+    *,
+    rollouts: Path = Path("data/rollouts"),
+    vae: Path = Path("models/vae.pt"),
+    out: Path = Path("models/lstm.pt"),
+    metrics: Path = Path("metrics/lstm.json"),
+    history: Path = Path("metrics/lstm_history.json"),
+    tracking: bool = True,
+    quiet: bool = True,
+) -> str:
+    with open_stage("train_lstm", "train-lstm", params, tracking=tracking) as run:
+        with progress(params.lstm.max_epochs, "train-lstm", quiet=quiet, unit="epochs") as bar:
+            fitted = fit_lstm(
+                rollouts,
+                vae,
+                params.lstm,
+                seed=params.seed,
+                device=params.lstm.device,
+                on_epoch=epoch_logger(run, bar),
+            )
+        result = fitted.result
+        summary: dict[str, Any] = {**result.metrics, **fitted.metrics, **fitted.data}
+        save_lstm(out, result, extra={"metrics": summary, "params": params.lstm.model_dump()})
+        world_model_outputs(
+            "train_lstm", run, params, out, metrics, history, summary, result.history
+        )
+        run.log_figure(fitted.figure(), "figures/latent_predictions.png")
+    m = fitted.metrics
+    return (
+        f"wrote {out}: 1-step latent MSE {m['one_step_mse']:.4g} "
+        f"(copy-last {m['copy_last_one_step_mse']:.4g}); 2-step {m['two_step_mse']:.4g} "
+        f"(copy-last {m['copy_last_two_step_mse']:.4g})"
+    )

@@ -1,0 +1,44 @@
+"""Stage ``train_vae``: the VAE (23-d observation → latent) on the rollouts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pipeline.config import Params
+from pipeline.progress import progress
+from pipeline.stages.common import epoch_logger, open_stage, world_model_outputs
+from pipeline.worldmodel.fit import fit_vae
+from pipeline.worldmodel.training import save_vae
+
+
+def run(
+    params: Params,
+    *,
+    rollouts: Path = Path("data/rollouts"),
+    out: Path = Path("models/vae.pt"),
+    metrics: Path = Path("metrics/vae.json"),
+    history: Path = Path("metrics/vae_history.json"),
+    tracking: bool = True,
+    quiet: bool = True,
+) -> str:
+    with open_stage("train_vae", "train-vae", params, tracking=tracking) as run:
+        with progress(params.vae.max_epochs, "train-vae", quiet=quiet, unit="epochs") as bar:
+            fitted = fit_vae(
+                rollouts,
+                params.vae,
+                seed=params.seed,
+                device=params.vae.device,
+                on_epoch=epoch_logger(run, bar),
+            )
+        result = fitted.result
+        summary: dict[str, Any] = {**result.metrics, **fitted.data}
+        save_vae(out, result, extra={"metrics": summary, "params": params.vae.model_dump()})
+        world_model_outputs(
+            "train_vae", run, params, out, metrics, history, summary, result.history
+        )
+        run.log_figure(fitted.figure(), "figures/reconstruction.png")
+    return (
+        f"wrote {out}: validation reconstruction MSE {result.metrics['val_recon_mse']:.4f} "
+        f"vs {result.metrics['baseline_mse']:.4f} for the training mean"
+    )
