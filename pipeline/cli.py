@@ -42,17 +42,41 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
     return (UserError, ValueError, FileNotFoundError, TrackingError)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (what ``kill``, make, CI and schedulers send), raised where the command runs.
+
+    A KeyboardInterrupt, so that it unwinds like Ctrl-C: the stage's MLflow run ends KILLED
+    and every atomic output being written is removed (nothing partial is published).
+    """
+
+
+def _raise_terminated(signum: int, frame: Any) -> None:
+    raise Terminated(f"terminated by signal {signum}")
+
+
 def friendly_errors(command: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn expected exceptions into ``error: <one line>`` and exit status 2."""
+    """Turn expected exceptions into ``error: <one line>`` and exit status 2; SIGTERM ends the
+    command like Ctrl-C (exit status 143)."""
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        import signal
+
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
         try:
             return command(*args, **kwargs)
+        except Terminated:
+            typer.echo("error: terminated (SIGTERM); nothing was written", err=True)
+            raise typer.Exit(code=128 + signal.SIGTERM) from None
+        except MemoryError:
+            typer.echo("error: out of memory; lower the sizes in params.yaml", err=True)
+            raise typer.Exit(code=2) from None
         except _expected_errors() as exc:
             message = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
             typer.echo(f"error: {message}", err=True)
             raise typer.Exit(code=2) from None
+        finally:
+            signal.signal(signal.SIGTERM, previous)
 
     return wrapper
 
@@ -432,27 +456,63 @@ def deps(
 @friendly_errors
 def render(
     out: Annotated[Path, typer.Option(help="Animated GIF to write.")] = Path("episode.gif"),
-    policy: Annotated[str, typer.Option(help="Robot policy: random.")] = "random",
-    episodes: Annotated[int, typer.Option(min=1, help="Episodes, one after the other.")] = 3,
+    policy: Annotated[
+        str,
+        typer.Option(
+            help="Robot policy: random, orca, sfm, a variant (its seed-0 agent in "
+            "--agents-dir) or the path of an agent file."
+        ),
+    ] = "random",
+    scenario: Annotated[
+        list[int] | None, typer.Option(min=0, help="Scenario ids to show (repeatable).")
+    ] = None,
+    episodes: Annotated[
+        int, typer.Option(min=1, help="Without --scenario: scenarios 0..episodes-1.")
+    ] = 3,
     seed: Annotated[int, typer.Option(min=0, help="Scenario seed.")] = 0,
     human_policy: Annotated[str, typer.Option(help="Human motion: mixed, sfm or orca.")] = "mixed",
+    agents_dir: Annotated[Path, typer.Option(help="Agents folder for a variant name.")] = Path(
+        "models/agents"
+    ),
+    params_path: ParamsOption = Path("params.yaml"),
     fps: Annotated[float, typer.Option(min=0.5, help="Frames per second.")] = 8.0,
     size: Annotated[int, typer.Option(min=64, help="Frame side in pixels.")] = 480,
 ) -> None:
-    """Render episodes of a robot policy in the simulator as an animated GIF."""
-    if policy != "random":
-        raise UserError(f"--policy: unknown policy {policy!r} (available: random)")
+    """Render episodes of any robot policy (random, a baseline, a trained agent) in the
+    simulator as an animated GIF, on chosen scenarios."""
+    from pipeline.agents.params import BASELINE_NAMES, VARIANT_NAMES
+
+    as_file = Path(policy)
+    if policy not in ("random", *BASELINE_NAMES, *VARIANT_NAMES) and as_file.suffix != ".pt":
+        choices = ", ".join(("random", *BASELINE_NAMES, *VARIANT_NAMES))
+        raise UserError(f"--policy: unknown {policy!r}; expected {choices} or an agent file (.pt)")
     import numpy as np
 
-    from pipeline.env import EnvParams
+    from pipeline.config import Params
     from pipeline.env.render import write_gif
     from pipeline.env.rollout import episode_frames, random_policy, run_episodes
 
-    params = EnvParams(human_policy=human_policy)
-    runs = run_episodes(params, random_policy(seed), seed, np.arange(episodes))
+    config = _load(params_path, None, None) if params_path.exists() else Params()
+    params = config.env.replace(human_policy=human_policy)
+    ids = np.asarray(scenario if scenario else range(episodes), dtype=np.int64)
+    if policy == "random":
+        runs = run_episodes(params, random_policy(seed), seed, ids)
+    elif policy in BASELINE_NAMES:
+        from pipeline.agents.baselines import make_baseline
+
+        overrides = getattr(config.baselines, policy).model_dump()
+        baseline = make_baseline(policy, **overrides)
+        act = lambda sim: baseline.act(sim.state, sim.params)  # noqa: E731
+        runs = run_episodes(params, act, seed, ids, reads_simulator=True)
+    else:
+        from pipeline.agents.agent_file import greedy_episodes, load_agent
+
+        path = agents_dir / policy / "seed-0.pt" if policy in VARIANT_NAMES else as_file
+        runs = greedy_episodes(load_agent(path), params, seed=seed, scenario_ids=ids)
     frames = []
-    for index, episode in enumerate(runs, start=1):
-        frames += episode_frames(episode, params, label=f"{policy} #{index}", size=size)
+    for episode in runs:
+        frames += episode_frames(episode, params, label=policy if len(policy) < 24 else "agent",
+                                 size=size)  # fmt: skip
     write_gif(frames, out, fps=fps)
     outcomes = ", ".join(
         "success" if e.success else f"{e.collision} collision" if e.collision else "timeout"

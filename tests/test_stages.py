@@ -267,3 +267,43 @@ def test_stage_functions_run_without_the_cli(tmp_path: Path) -> None:
     )  # fmt: skip
     assert vae.is_file() and (tmp_path / "vae.params.yaml").is_file()
     assert set(yaml.safe_load((tmp_path / "vae.params.yaml").read_text())) == {"seed", "vae"}
+
+
+def test_sigterm_ends_the_run_killed_and_leaves_no_output(workdir: Path) -> None:
+    """kill (SIGTERM) mid-stage: exit 143, the MLflow run KILLED (not RUNNING forever), and
+    neither the output nor a temporary of it left behind."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from mlflow.tracking import MlflowClient
+
+    cli = [sys.executable, "-c", "from pipeline.cli import app; app()"]
+    process = subprocess.Popen(
+        [*cli, "collect", "--quiet", "--set", "collect.episodes=1000000"],
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    client = MlflowClient()
+    deadline = time.monotonic() + 120
+    runs: list = []
+    while time.monotonic() < deadline and not runs:
+        time.sleep(0.5)
+        experiment = (workdir / "mlflow.db").exists() and client.get_experiment_by_name("socnav-wm")
+        if experiment:
+            runs = client.search_runs([experiment.experiment_id])
+    assert runs and runs[0].info.status == "RUNNING", process.stderr
+    time.sleep(1.0)  # inside the collection loop
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signal.SIGTERM, stderr
+    assert stderr.strip().splitlines()[-1].startswith("error: terminated")
+    assert client.get_run(runs[0].info.run_id).info.status == "KILLED"
+    leftovers = (
+        [p.name for p in (workdir / "data").glob("*")] if (workdir / "data").exists() else []
+    )
+    assert leftovers == [], leftovers
