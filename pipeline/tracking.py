@@ -63,9 +63,30 @@ class TrackingError(RuntimeError):
     """The tracking backend cannot be used; the message is one line with the way out."""
 
 
+def repository_root() -> Path:
+    """Where the default store lives: the DVC repository's root.
+
+    ``DVC_ROOT`` when DVC runs the stage (under ``dvc exp run --queue`` or ``--temp`` it names
+    the user's repository, not DVC's temporary workspace, which is deleted afterwards); else
+    the nearest folder above the working directory holding ``dvc.yaml`` or ``.git``; else the
+    working directory.
+    """
+    if os.environ.get("DVC_ROOT"):
+        return Path(os.environ["DVC_ROOT"]).resolve()
+    here = Path.cwd().resolve()
+    for folder in (here, *here.parents):
+        if (folder / "dvc.yaml").is_file() or (folder / ".git").exists():
+            return folder
+    return here
+
+
 def tracking_uri() -> str:
-    """``MLFLOW_TRACKING_URI`` if set (and not empty), else ``sqlite:///mlflow.db``."""
-    return os.environ.get("MLFLOW_TRACKING_URI", "").strip() or DEFAULT_TRACKING_URI
+    """``MLFLOW_TRACKING_URI`` if set (and not empty), else ``mlflow.db`` at the repository's
+    root (:func:`repository_root`) as an absolute SQLite URI."""
+    uri = os.environ.get("MLFLOW_TRACKING_URI", "").strip()
+    if uri:
+        return uri
+    return f"sqlite:///{repository_root() / DEFAULT_TRACKING_URI.removeprefix('sqlite:///')}"
 
 
 def experiment_name() -> str:

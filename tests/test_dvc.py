@@ -148,3 +148,39 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
     expected |= {f"train_agent@{v}-{s}" for v, s in runs}
     expected |= {f"evaluate@{v}" for v in ("dueling-dqn", "2stepahead-maspm")}
     assert expected <= stale, sorted(expected - stale)
+
+
+def test_a_queued_experiment_keeps_its_mlflow_runs(repo: Path) -> None:
+    """`dvc exp run --queue` runs the stage in a temporary workspace that DVC deletes after:
+    with the default tracking URI the runs still land in the repository's own mlflow.db."""
+    import time
+
+    env = dict(os.environ)
+    env.pop("MLFLOW_TRACKING_URI", None)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    env["DVC_NO_ANALYTICS"] = "1"
+    dvc = str(Path(sys.executable).parent / "dvc")
+
+    def run(*args: str) -> str:
+        result = subprocess.run([dvc, *args], cwd=repo, env=env, capture_output=True, text=True)
+        assert result.returncode == 0, result.stdout + result.stderr
+        return result.stdout
+
+    run("exp", "run", "--queue", "collect", "--name", "queued-collect")
+    run("queue", "start", "--jobs", "1")
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline:
+        status = run("queue", "status")
+        if "Success" in status or "Failed" in status:
+            break
+        time.sleep(2)
+    run("queue", "stop", "--kill")
+    assert "Success" in status, status + run("queue", "logs", "queued-collect")
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=f"sqlite:///{repo / 'mlflow.db'}")
+    experiment = client.get_experiment_by_name("socnav-wm")
+    runs = client.search_runs([experiment.experiment_id])
+    assert [run.data.tags["stage"] for run in runs] == ["collect"]
+    assert runs[0].data.tags["dvc_exp_name"] == "queued-collect"
+    assert runs[0].info.status == "FINISHED"

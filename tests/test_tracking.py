@@ -234,9 +234,20 @@ def test_sqlite_in_a_missing_directory_is_an_error(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []  # checking creates nothing
 
 
-def test_default_uri_is_sqlite_in_the_working_directory(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_default_uri_is_sqlite_at_the_repository_root(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    assert tracking_uri() == "sqlite:///mlflow.db"
+    monkeypatch.delenv("DVC_ROOT", raising=False)
+    repo = tmp_path / "repo"
+    (repo / "pipeline").mkdir(parents=True)
+    (repo / "dvc.yaml").write_text("stages: {}\n")
+    monkeypatch.chdir(repo / "pipeline")  # a command started below the root
+    assert tracking_uri() == f"sqlite:///{repo.resolve()}/mlflow.db"
+    # Under `dvc exp run --queue/--temp`, DVC_ROOT names the user's repository, not the
+    # temporary workspace the stage runs in.
+    monkeypatch.setenv("DVC_ROOT", str(tmp_path))
+    assert tracking_uri() == f"sqlite:///{tmp_path.resolve()}/mlflow.db"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", "http://example:5000")
     assert tracking_uri() == "http://example:5000"
 
