@@ -194,3 +194,21 @@ def test_spec_shows_the_step_limit_and_the_episode_truncates_once_at_201() -> No
     assert ends == [(201, False, True)]
     envs = gym.make_vec("SocNav-v0", num_envs=2)
     assert envs.unwrapped.params.max_steps == 201
+
+
+def test_the_core_install_is_enough_for_the_environment() -> None:
+    """The simulator and its gymnasium env need only the core dependencies: making and
+    stepping the env imports none of the pipeline's (torch, MLflow, DVC, pyarrow, the CLI)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gymnasium as gym\n"
+        "env = gym.make('pipeline.env:SocNav-v0')\n"
+        "env.reset(seed=0); env.step(1)\n"
+        "heavy = ('torch', 'mlflow', 'dvc', 'pyarrow', 'typer', 'matplotlib', 'rich')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
