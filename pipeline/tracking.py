@@ -42,6 +42,8 @@ __all__ = [
 
 DEFAULT_TRACKING_URI = "sqlite:///mlflow.db"
 EXPERIMENT_NAME = "socnav-wm"
+EXPERIMENT_KIND_TAG = "mlflow.experimentKind"
+EXPERIMENT_KIND = "custom_model_development"
 HEALTH_TIMEOUT_S = 3.0
 
 # The most conservative limits across MLflow server versions (older servers cap a param value at
@@ -395,16 +397,30 @@ def _experiment_id(client: Any, uri: str) -> str:
 
     name = experiment_name()
     experiment = client.get_experiment_by_name(name)
-    if experiment is not None:
-        return experiment.experiment_id
-    try:
-        return client.create_experiment(name, artifact_location=_artifact_location(uri))
-    except MlflowException:
-        # Another stage (a parallel `dvc exp run`) created it in between.
+    if experiment is None:
+        # A parallel stage (`dvc exp run`) may create it in between: then it is found below.
+        with contextlib.suppress(MlflowException):
+            client.create_experiment(
+                name,
+                artifact_location=_artifact_location(uri),
+                # MLflow 3 opens an experiment of this kind in its model-training view.
+                tags={EXPERIMENT_KIND_TAG: EXPERIMENT_KIND},
+            )
         experiment = client.get_experiment_by_name(name)
         if experiment is None:
-            raise
-        return experiment.experiment_id
+            raise TrackingError(f"{_redact(uri)}: cannot create the experiment {name!r}; {_HINT}")
+    elif EXPERIMENT_KIND_TAG not in experiment.tags:
+        client.set_experiment_tag(experiment.experiment_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
+    _check_artifact_store(uri, experiment.artifact_location)
+    return experiment.experiment_id
+
+
+def _check_artifact_store(uri: str, location: str | None) -> None:
+    """The experiment's artifact folder must be writable (for local stores), checked before
+    the run opens: otherwise the stage would do all its work and die logging its first file."""
+    if not location or urllib.parse.urlsplit(location).scheme.lower() not in ("", "file"):
+        return  # a server or an object store checks its own permissions
+    _check_directory(f"{_redact(uri)} (artifact store {location})", _file_uri_path(location))
 
 
 def _artifact_location(uri: str) -> str | None:

@@ -259,3 +259,27 @@ def _env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
     return env
+
+
+def test_an_unwritable_artifact_store_fails_before_the_run_opens(
+    sqlite_uri: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The pre-flight checks the experiment's artifact folder, not only the database's."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("MLFLOW_EXPERIMENT_NAME", "blocked")
+    client = mlflow.tracking.MlflowClient()
+    client.create_experiment("blocked", artifact_location=(blocker / "mlruns").as_uri())
+    ran = False
+    with pytest.raises(TrackingError, match="artifact store") as error, stage_run("collect", {}):
+        ran = True
+    assert not ran and "\n" not in str(error.value) and "is not a directory" in str(error.value)
+    experiment = client.get_experiment_by_name("blocked")
+    assert client.search_runs([experiment.experiment_id]) == []
+
+
+def test_the_experiment_opens_in_mlflow_3s_model_training_view(sqlite_uri: str) -> None:
+    with stage_run("collect", {}):
+        pass
+    experiment = mlflow.tracking.MlflowClient().get_experiment_by_name("socnav-wm")
+    assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
