@@ -107,3 +107,24 @@ def test_bench_train_rejects_a_bad_override_in_one_line(tmp_path: Path) -> None:
     assert result.output.strip() == (
         "error: --set agent.batch_size=0: agent.batch_size: must be > 0, got 0"
     )
+
+
+def test_a_bad_setting_is_reported_before_torch_or_mlflow_is_imported(tmp_path: Path) -> None:
+    """Fail fast: the params are validated before a stage's heavy imports (seconds each)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from pipeline.cli import app\n"
+        "try:\n"
+        "    app(['train-agent', '--variant', 'maspm', '--set', 'agent.gamma=2'])\n"
+        "except SystemExit as exit:\n"
+        "    print(exit.code, sorted(m for m in ('torch', 'mlflow') if m in sys.modules))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert result.stdout.strip() == "2 []", result.stdout + result.stderr
+    assert "agent.gamma" in result.stderr and len(result.stderr.strip().splitlines()) == 1
