@@ -432,10 +432,19 @@ def deps(
         Path | None,
         typer.Option(help="Compare with this dvc.yaml; exit 1 if a stage's deps differ."),
     ] = None,
+    write: Annotated[
+        Path | None,
+        typer.Option(help="Rewrite the source deps of this dvc.yaml's stages to match."),
+    ] = None,
 ) -> None:
     """Each stage's source dependencies: the import closure of its module (what dvc.yaml
     lists)."""
-    from pipeline.stages.deps import dvc_yaml_differences, stage_dependencies
+    from pipeline.stages.deps import dvc_yaml_differences, stage_dependencies, write_dvc_yaml
+
+    if write is not None:
+        changed = write_dvc_yaml(write)
+        typer.echo(f"{write}: {'updated' if changed else 'already up to date'}")
+        return
 
     if check is not None:
         problems = dvc_yaml_differences(check)

@@ -8,6 +8,7 @@ most a hidden ``.name.tmp-<pid>-<random>`` file, which no reader (or DVC) takes 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -20,7 +21,19 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_json_atomic", "write_text_atomic"]
+__all__ = [
+    "OutputError",
+    "atomic_path",
+    "check_writable",
+    "outputs_together",
+    "write_bytes_atomic",
+    "write_json_atomic",
+    "write_text_atomic",
+]
+
+
+class OutputError(ValueError):
+    """An output location cannot be written (one line naming it)."""
 
 
 def _temp_sibling(target: Path, kind: str) -> Path:
@@ -57,6 +70,73 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def _writer_is_gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # exists, owned by someone else
+        return False
+    return False
+
+
+def remove_stale_temporaries(target: Path) -> list[Path]:
+    """Delete the temporaries of ``target`` (``.name.tmp-<pid>-…``, ``.name.old-<pid>-…``) whose
+    writing process no longer exists: what a killed run left. Returns what was removed."""
+    removed = []
+    prefix = f".{target.name}."
+    if not target.parent.is_dir():
+        return removed
+    for entry in target.parent.iterdir():
+        rest = entry.name[len(prefix) :] if entry.name.startswith(prefix) else ""
+        kind, _, tail = rest.partition("-")
+        pid = tail.partition("-")[0]
+        if kind in ("tmp", "old") and pid.isdigit() and _writer_is_gone(int(pid)):
+            _remove(entry)
+            removed.append(entry)
+    return removed
+
+
+def check_writable(*targets: str | os.PathLike[str]) -> None:
+    """Fail before any work when an output could not be written: for each target, its nearest
+    existing ancestor must be a writable directory (the rest is created). Raises
+    :class:`OutputError` with one line naming the target."""
+    for target in map(Path, targets):
+        existing = target.parent.resolve()
+        while not existing.exists() and existing != existing.parent:
+            existing = existing.parent
+        if not existing.is_dir():
+            raise OutputError(f"{target}: cannot be written ({existing} is not a directory)")
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise OutputError(f"{target}: cannot be written ({existing} is not writable)")
+        if target.exists() and target.is_file() and not os.access(target, os.W_OK):
+            raise OutputError(f"{target}: cannot be written (the file is read-only)")
+
+
+@contextmanager
+def outputs_together(*targets: str | os.PathLike[str]) -> Iterator[list[Path]]:
+    """Temporary paths for a stage's outputs, published together or not at all.
+
+    The block writes every output at its temporary path; when it succeeds, each temporary is
+    renamed over its target, one right after the other (the window in which some outputs are
+    new and others old is a few renames long, not the length of the work). When the block
+    raises, every temporary is removed and every target keeps its old content.
+    """
+    paths = [Path(t) for t in targets]
+    temporaries: list[Path] = []
+    with contextlib.ExitStack() as stack:
+        for path in paths:
+            temporaries.append(stack.enter_context(_deferred(path)))
+        yield temporaries
+    # every _deferred context has published its temporary
+
+
+@contextmanager
+def _deferred(target: Path) -> Iterator[Path]:
+    with atomic_path(target) as tmp:
+        yield tmp
+
+
 def _remove(path: Path) -> None:
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
@@ -77,6 +157,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(target)
     tmp = _temp_sibling(target, "tmp")
     try:
         yield tmp

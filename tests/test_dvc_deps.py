@@ -6,7 +6,12 @@ from pathlib import Path
 
 import yaml
 
-from pipeline.stages.deps import dvc_yaml_differences, import_closure, stage_dependencies
+from pipeline.stages.deps import (
+    dvc_yaml_differences,
+    import_closure,
+    stage_dependencies,
+    write_dvc_yaml,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,3 +47,17 @@ def test_the_closure_follows_imports_inside_functions_and_packages() -> None:
     assert "pipeline/evaluation/figures.py" not in deps["train_agent"]
     assert "pipeline/agents/learner.py" not in deps["collect"]
     assert import_closure("pipeline.stages.train_vae") == deps["train_vae"]
+
+
+def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> None:
+    text = (ROOT / "dvc.yaml").read_text()
+    broken = text.replace("      - pipeline/env/reward.py\n", "", 1).replace(
+        "      - pipeline/io.py\n", "      - pipeline/io.py\n      - pipeline/cli.py\n", 1
+    )
+    target = tmp_path / "dvc.yaml"
+    target.write_text(broken)
+    assert dvc_yaml_differences(target)
+    assert write_dvc_yaml(target) is True
+    assert dvc_yaml_differences(target) == []
+    assert target.read_text() == text  # data deps, comments and order as they were
+    assert write_dvc_yaml(target) is False

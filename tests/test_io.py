@@ -13,9 +13,12 @@ import pytest
 import torch
 
 from pipeline.io import (
+    OutputError,
     atomic_path,
+    check_writable,
     load_saved,
     load_torch_file,
+    outputs_together,
     write_bytes_atomic,
     write_json_atomic,
     write_text_atomic,
@@ -182,3 +185,52 @@ def test_load_saved_checks_existence_format_and_version(tmp_path: Path) -> None:
         with pytest.raises(_FileError) as error:
             load_saved(path, "x file", "socnav-wm-x", 2, _FileError)
         assert str(error.value) == f"{path}: {problem}"
+
+
+def test_a_killed_writers_temporaries_are_removed_by_the_next_write(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    target = tmp_path / "vae.pt"
+    # A writer that died: its pid no longer exists (a finished child process).
+    child = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)  # fmt: skip
+    dead = int(child.stdout)
+    stale = tmp_path / f".vae.pt.tmp-{dead}-0a1b2c3d.pt"
+    stale.write_bytes(b"half")
+    stale_dir = tmp_path / f".vae.pt.old-{dead}-0a1b2c3d.pt"
+    stale_dir.mkdir()
+    alive = tmp_path / f".vae.pt.tmp-{os.getpid()}-0a1b2c3d.pt"  # a writer still running
+    alive.write_bytes(b"in progress")
+    other = tmp_path / f".lstm.pt.tmp-{dead}-0a1b2c3d.pt"  # another file's: not ours to judge
+    other.write_bytes(b"x")
+    write_bytes_atomic(target, b"new")
+    assert target.read_bytes() == b"new"
+    assert not stale.exists() and not stale_dir.exists()
+    assert alive.exists() and other.exists()
+
+
+def test_check_writable_names_the_output_that_cannot_be_written(tmp_path: Path) -> None:
+    blocker = tmp_path / "metrics"
+    blocker.write_text("a file where a folder should be")
+    check_writable(tmp_path / "new" / "deep" / "a.json", tmp_path / "b.json")  # creatable
+    with pytest.raises(OutputError) as error:
+        check_writable(tmp_path / "ok.json", blocker / "vae.json")
+    assert str(error.value).startswith(f"{blocker / 'vae.json'}: cannot be written")
+    assert "\n" not in str(error.value)
+
+
+def test_outputs_together_publishes_all_or_none(tmp_path: Path) -> None:
+    a, b = tmp_path / "model.pt", tmp_path / "metrics.json"
+    a.write_text("old model")
+    b.write_text("old metrics")
+    with pytest.raises(RuntimeError), outputs_together(a, b) as (ta, tb):
+        ta.write_text("new model")
+        raise RuntimeError("the metrics could not be computed")
+    assert (a.read_text(), b.read_text()) == ("old model", "old metrics")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["metrics.json", "model.pt"]
+    with outputs_together(a, b) as (ta, tb):
+        ta.write_text("new model")
+        tb.write_text("new metrics")
+        assert a.read_text() == "old model"  # nothing published before the block ends
+    assert (a.read_text(), b.read_text()) == ("new model", "new metrics")

@@ -80,6 +80,33 @@ def test_overrides_apply_and_are_saved(workdir: Path) -> None:
         (["train-vae", "--rollouts", "nowhere"], "nowhere"),
         (["train-lstm", "--vae", "nothing.pt", "--no-tracking"], "nothing.pt"),
         (["train-vae", "--device", "tpu"], "--device: must be one of auto, cpu, cuda"),
+        # Sizes the machine cannot hold: refused in one line before any work.
+        (["collect", "--set", "collect.episodes=1000000000000"], "collect.episodes: "),
+        (["collect", "--set", "env.num_humans=100000"], "env.num_humans: 100000 humans"),
+        (
+            [
+                "train-agent",
+                "--variant",
+                "dueling-dqn",
+                "--no-tracking",
+                "--set",
+                "agent.num_envs=100000000",
+                "--set",
+                "agent.buffer_size=100000000",
+            ],
+            "num_envs: 100,000,000 environments would take",
+        ),
+        (
+            [
+                "train-agent",
+                "--variant",
+                "dueling-dqn",
+                "--no-tracking",
+                "--set",
+                "agent.buffer_size=100000000000",
+            ],
+            "agent.buffer_size: a replay buffer of 100,000,000,000 transitions would take",
+        ),
     ],
 )
 def test_bad_input_gives_one_line_and_exit_2(workdir: Path, args: list[str], message: str) -> None:
@@ -307,3 +334,17 @@ def test_sigterm_ends_the_run_killed_and_leaves_no_output(workdir: Path) -> None
         [p.name for p in (workdir / "data").glob("*")] if (workdir / "data").exists() else []
     )
     assert leftovers == [], leftovers
+
+
+def test_an_unwritable_output_fails_before_the_work(workdir: Path) -> None:
+    """train-vae with a metrics folder that cannot exist: one line, exit 2, before any
+    training, and the model is not written either (a stage's outputs change as a set)."""
+    _invoke("collect", "--no-tracking")
+    (workdir / "blocked").write_text("a file where the metrics folder should be")
+    result = runner.invoke(app, ["train-vae", "--no-tracking", "--metrics", "blocked/vae.json"])
+    assert result.exit_code == 2, result.output
+    assert result.output.strip() == (
+        "error: blocked/vae.json: cannot be written "
+        f"({(workdir / 'blocked').resolve()} is not a directory)"
+    )
+    assert not (workdir / "models").exists()

@@ -79,9 +79,31 @@ def save_checkpoint(path: str | Path, identity: dict[str, Any], state: dict[str,
         torch.save(payload, tmp)
 
 
+class UnreadableCheckpoint(ValueError):
+    """A checkpoint file that cannot be read (truncated, damaged, another format)."""
+
+
+def set_aside(path: str | Path) -> Path:
+    """Rename an unreadable checkpoint to ``<name>.unreadable-<n>`` (kept for inspection, never
+    resumed) and return the new path."""
+    path = Path(path)
+    n = 0
+    while (aside := path.with_name(f"{path.name}.unreadable-{n}")).exists():
+        n += 1
+    path.rename(aside)
+    return aside
+
+
 def load_checkpoint(path: str | Path, identity: dict[str, Any]) -> dict[str, Any]:
-    """The training state saved at ``path``, after checking that it is the run ``identity``."""
-    payload = load_saved(path, "agent checkpoint", CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION)
+    """The training state saved at ``path``, after checking that it is the run ``identity``.
+
+    Raises:
+        UnreadableCheckpoint: the file cannot be read as a checkpoint of this format.
+        ValueError: it is the checkpoint of another run.
+    """
+    payload = load_saved(
+        path, "agent checkpoint", CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, UnreadableCheckpoint
+    )
     saved = payload["run"]
     for key in ("variant", "seed", "params", "env_params", "world_model"):
         if saved.get(key) != identity[key]:

@@ -83,6 +83,12 @@ class ReplayBuffer:
         self.size = 0
         """Number of valid transitions (≤ capacity)."""
 
+    @staticmethod
+    def bytes_needed(capacity: int, feature_dim: int) -> int:
+        """What a buffer of these sizes allocates: two float32 feature rows, an int64 action
+        and three float32 scalars per transition."""
+        return int(capacity) * (2 * 4 * int(feature_dim) + 8 + 3 * 4)
+
     def __len__(self) -> int:
         return self.size
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import random
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -41,7 +42,13 @@ import numpy as np
 import torch
 
 from pipeline.agents.agent_file import Agent, greedy_episodes, load_world_model, variant_for
-from pipeline.agents.checkpoint import load_checkpoint, run_identity, save_checkpoint
+from pipeline.agents.checkpoint import (
+    UnreadableCheckpoint,
+    load_checkpoint,
+    run_identity,
+    save_checkpoint,
+    set_aside,
+)
 from pipeline.agents.features import Variant
 from pipeline.agents.learner import DQNLearner
 from pipeline.agents.params import AgentParams, check_variant
@@ -52,6 +59,7 @@ from pipeline.env.rollout import Episode
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_WALL, BatchState
 from pipeline.io import atomic_path
 from pipeline.progress import progress
+from pipeline.resources import check_fits
 from pipeline.worldmodel.lstm import LatentLSTM
 from pipeline.worldmodel.training import resolve_device
 from pipeline.worldmodel.vae import VAE
@@ -378,6 +386,8 @@ def train_agent(
     # -- the pieces --------------------------------------------------------------------------
     sim = Simulator(p.num_envs, env_params)
     features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=device)
+    needed = ReplayBuffer.bytes_needed(p.buffer_size, features_of.feature_dim)
+    check_fits("agent.buffer_size", needed, f"a replay buffer of {p.buffer_size:,} transitions")
     learner = DQNLearner(features_of.feature_dim, p, device)
     obs, _ = sim.reset(seed=training_env_seed(seed))
     state = TrainState(
@@ -394,7 +404,13 @@ def train_agent(
         epsilon=p.epsilon_start,
     )
     if resume and checkpoint_path is not None and checkpoint_path.exists():
-        state.load_state_dict(load_checkpoint(checkpoint_path, identity))
+        try:
+            state.load_state_dict(load_checkpoint(checkpoint_path, identity))
+        except UnreadableCheckpoint as exc:
+            # A damaged checkpoint (a full disk, a copy cut short) must not block every later
+            # `dvc repro --resume`: keep it aside for inspection and train from the start.
+            aside = set_aside(checkpoint_path)
+            warnings.warn(f"{exc}; moved to {aside}, training from the start", stacklevel=2)
 
     start, elapsed_before = time.perf_counter(), state.wall_time
 

@@ -27,6 +27,7 @@ from pipeline.env.params import EnvParams
 from pipeline.env.reward import REWARD_CODES, compute_dmin, compute_reward
 from pipeline.env.scenario import POLICY_CODES, spawn
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_NONE, COLLISION_WALL, BatchState
+from pipeline.resources import check_fits
 
 ACTION_NAMES = ("stop", "forward", "rotate-left", "rotate-right")
 NUM_ACTIONS = len(ACTION_NAMES)
@@ -136,6 +137,10 @@ class Simulator:
         self.params = params if params is not None else EnvParams()
         self.num_envs = int(num_envs)
         self.obs_dim = observation_size(self.params.num_humans)
+        # The state, the observations and a step's temporaries: refuse in one line what the
+        # machine cannot hold rather than allocate until MemoryError.
+        one_env = sum(a.nbytes for a in vars(BatchState.zeros(1, self.params.num_humans)).values())
+        check_fits("num_envs", 4 * one_env * self.num_envs, f"{self.num_envs:,} environments")
         self.state = BatchState.zeros(self.num_envs, self.params.num_humans)
         self.state.done[:] = True
         self.seed = 0

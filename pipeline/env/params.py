@@ -257,6 +257,18 @@ class EnvParams(Section):
             raise ValueError(
                 f"min_goal_distance: {self.min_goal_distance} m cannot fit in the spawn area"
             )
+        # Every disc (robot, its goal, each human and its goal) is drawn so that it touches
+        # nothing: beyond the room's area, spawning could never succeed (and would retry for
+        # as long as it is let).
+        per_human = math.pi * (self.human_radius**2 + self.human_goal_radius**2)
+        robot = math.pi * (self.robot_radius**2 + self.goal_radius**2)
+        fit = int(((2 * self.wall_half_size) ** 2 - robot) // per_human)
+        if self.num_humans > fit:
+            raise ValueError(
+                f"num_humans: {self.num_humans} humans and their goals cannot be placed in a "
+                f"{self.room_size} m room (their discs alone need more than its area; "
+                f"at most {max(fit, 0)})"
+            )
         return self
 
     @property

@@ -6,8 +6,10 @@ from pathlib import Path
 
 from pipeline.config import Params
 from pipeline.data.collect import collect_rollouts
-from pipeline.io import atomic_path, write_json_atomic
+from pipeline.env.observation import observation_size
+from pipeline.io import check_writable, outputs_together, write_json_atomic
 from pipeline.progress import progress
+from pipeline.resources import check_disk
 from pipeline.stages.common import open_stage, save_stage_params
 
 
@@ -20,10 +22,16 @@ def run(
     quiet: bool = True,
 ) -> str:
     c = params.collect
+    check_writable(out, metrics)
+    # Every episode at its longest, every value of a row uncompressed: an upper bound.
+    row_bytes = 8 * (2 * observation_size(params.env.num_humans) + 8 + 2 * params.env.num_humans)
+    most = c.episodes * params.env.max_steps * row_bytes
+    check_disk("collect.episodes", most, out.parent, f"{c.episodes:,} episodes")
     with open_stage("collect", "collect", params, tracking=tracking) as run:
-        # The whole directory appears at once: a killed run never leaves a partial dataset.
+        # The whole directory appears at once, with its metrics: a killed run never leaves a
+        # partial dataset.
         with (
-            atomic_path(out) as staging,
+            outputs_together(out, metrics) as (staging, metrics_tmp),
             progress(c.episodes, "collect", quiet=quiet, unit="episodes") as bar,
         ):
             summary = collect_rollouts(
@@ -36,7 +44,7 @@ def run(
                 on_episodes=bar.advance,
             )
             save_stage_params("collect", params, staging / "params.yaml")
-        write_json_atomic(metrics, summary.as_metrics())
+            write_json_atomic(metrics_tmp, summary.as_metrics())
         run.log_metrics(summary.as_metrics())
         run.log_artifact(out / "params.yaml")
     return (

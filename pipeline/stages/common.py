@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.config import STAGE_SECTIONS, Params, params_dict, save_resolved, select_sections
-from pipeline.io import write_json_atomic
+from pipeline.io import outputs_together, write_json_atomic
 from pipeline.tracking import Run, stage_run
 
 
@@ -78,18 +78,21 @@ def world_model_outputs(
     stage: str,
     run: Run,
     params: Params,
+    save_model: Callable[[Path], None],
     model: Path,
     metrics: Path,
     history: Path,
     summary: dict[str, float],
     epochs: list[dict[str, float]],
 ) -> None:
-    """What a world-model stage writes beside its model file, and logs with it to MLflow: the
-    params it read, the metrics and the per-epoch history (JSON), the final metrics (without
-    the per-epoch series, so their curves stay clean)."""
-    save_stage_params(stage, params, config_path(model))
-    write_json_atomic(metrics, summary)
-    write_json_atomic(history, epochs)
+    """A world-model stage's outputs, published together: the model (``save_model(path)``), the
+    params it read, the metrics and the per-epoch history (JSON); then logged to MLflow with
+    the final metrics (without the per-epoch series, so their curves stay clean)."""
+    with outputs_together(model, config_path(model), metrics, history) as paths:
+        save_model(paths[0])
+        save_stage_params(stage, params, paths[1])
+        write_json_atomic(paths[2], summary)
+        write_json_atomic(paths[3], epochs)
     per_epoch = set().union(*(row.keys() for row in epochs))
     run.log_metrics({key: value for key, value in summary.items() if key not in per_epoch})
     run.log_artifact(model)

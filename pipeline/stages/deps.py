@@ -130,3 +130,41 @@ def dvc_yaml_differences(path: str | Path = "dvc.yaml") -> list[str]:
                 f"not executed {', '.join(extra) or 'nothing'}"
             )
     return problems
+
+
+def write_dvc_yaml(path: str | Path = "dvc.yaml") -> bool:
+    """Rewrite the ``pipeline/`` entries of each stage's deps in ``path`` to its import closure,
+    keeping everything else (data deps, comments, order) as it is. Returns whether the file
+    changed."""
+    import re
+
+    path = Path(path)
+    expected = stage_dependencies()
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    out: list[str] = []
+    stage: str | None = None
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        top = re.match(r"^  ([A-Za-z_][\w-]*):\s*$", line)
+        if top:
+            stage = top.group(1)
+        deps = re.match(r"^(\s+)deps:", line)
+        if deps and stage in expected:
+            out.append(line)
+            item = deps.group(1) + "  - "
+            i += 1
+            while i < len(lines) and lines[i].startswith(item):
+                if not lines[i][len(item) :].startswith("pipeline"):
+                    out.append(lines[i])  # data deps stay first, as they are
+                i += 1
+            out.extend(f"{item}{source}\n" for source in expected[stage])
+            stage = None
+            continue
+        out.append(line)
+        i += 1
+    text = "".join(out)
+    changed = text != path.read_text(encoding="utf-8")
+    if changed:
+        path.write_text(text, encoding="utf-8")
+    return changed

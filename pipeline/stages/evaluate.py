@@ -14,6 +14,7 @@ from pipeline.evaluation.evaluate import (
     evaluation_metrics,
     write_evaluation,
 )
+from pipeline.io import check_writable, outputs_together
 from pipeline.stages.common import open_stage
 
 
@@ -30,6 +31,10 @@ def run(
     if method not in METHODS:
         raise ValueError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
     stage = "evaluate_baseline" if method in BASELINE_METHODS else "evaluate"
+    episodes_path = out_dir / f"{method}.parquet"
+    trajectories_path = out_dir / f"{method}-trajectories.parquet"
+    metrics_path = metrics_dir / f"{method}.json"
+    check_writable(episodes_path, trajectories_path, metrics_path)
     with open_stage(stage, f"evaluate/{method}", params, tracking=tracking) as run:
         agent_paths = None
         if method in AGENT_METHODS:
@@ -54,11 +59,8 @@ def run(
             batch_size=params.eval.batch_size,
             quiet=quiet,
         )
-        episodes_path = out_dir / f"{method}.parquet"
-        metrics_path = metrics_dir / f"{method}.json"
-        write_evaluation(
-            result, episodes_path, out_dir / f"{method}-trajectories.parquet", metrics_path
-        )
+        with outputs_together(episodes_path, trajectories_path, metrics_path) as paths:
+            write_evaluation(result, *paths)
         content = evaluation_metrics(result)
         run.set_tag("method", method)
         run.log_params({"method": method})

@@ -15,7 +15,7 @@ from pipeline.agents.training import (
     write_training_log,
 )
 from pipeline.config import Params
-from pipeline.io import write_json_atomic
+from pipeline.io import check_writable, outputs_together, write_json_atomic
 from pipeline.stages.common import config_path, open_stage, save_stage_params, training_logger
 
 
@@ -38,6 +38,10 @@ def run(
     check_variant(variant)
     name = f"{variant}/seed-{seed}"
     p = params.agent
+    out = out_dir / variant / f"seed-{seed}.pt"
+    log = log_dir / variant / f"seed-{seed}.parquet"
+    metrics = metrics_dir / variant / f"seed-{seed}.json"
+    check_writable(out, config_path(out), log, metrics)
     with open_stage("train_agent", f"train-agent/{name}", params, tracking=tracking) as run:
         identity = run_identity(variant, p, params.env, seed, vae, lstm)
         checkpoint = checkpoint_file(checkpoint_dir, identity)
@@ -67,11 +71,11 @@ def run(
             scenario_ids=range(result.params.eval_episodes),
         )
         summary = training_metrics(result, greedy)
-        out = out_dir / variant / f"seed-{seed}.pt"
-        save_agent(out, result, extra={"metrics": summary, "selection": result.selection})
-        save_stage_params("train_agent", params, config_path(out))
-        write_training_log(result.episodes, log_dir / variant / f"seed-{seed}.parquet")
-        write_json_atomic(metrics_dir / variant / f"seed-{seed}.json", summary)
+        with outputs_together(out, config_path(out), log, metrics) as paths:
+            save_agent(paths[0], result, extra={"metrics": summary, "selection": result.selection})
+            save_stage_params("train_agent", params, paths[1])
+            write_training_log(result.episodes, paths[2])
+            write_json_atomic(paths[3], summary)
         run.log_metrics({k: float(v) for k, v in summary.items() if v is not None})
         for selection_run in result.selection:
             run.log_metrics(

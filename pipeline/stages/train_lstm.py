@@ -6,8 +6,9 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.config import Params
+from pipeline.io import check_writable
 from pipeline.progress import progress
-from pipeline.stages.common import epoch_logger, open_stage, world_model_outputs
+from pipeline.stages.common import config_path, epoch_logger, open_stage, world_model_outputs
 from pipeline.worldmodel.fit import fit_lstm
 from pipeline.worldmodel.training import save_lstm
 
@@ -23,6 +24,7 @@ def run(
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
+    check_writable(out, config_path(out), metrics, history)
     with open_stage("train_lstm", "train-lstm", params, tracking=tracking) as run:
         with progress(params.lstm.max_epochs, "train-lstm", quiet=quiet, unit="epochs") as bar:
             fitted = fit_lstm(
@@ -35,10 +37,11 @@ def run(
             )
         result = fitted.result
         summary: dict[str, Any] = {**result.metrics, **fitted.metrics, **fitted.data}
-        save_lstm(out, result, extra={"metrics": summary, "params": params.lstm.model_dump()})
+        extra = {"metrics": summary, "params": params.lstm.model_dump()}
         world_model_outputs(
-            "train_lstm", run, params, out, metrics, history, summary, result.history
-        )
+            "train_lstm", run, params, lambda path: save_lstm(path, result, extra=extra),
+            out, metrics, history, summary, result.history,
+        )  # fmt: skip
         run.log_figure(fitted.figure(), "figures/latent_predictions.png")
     m = fitted.metrics
     return (

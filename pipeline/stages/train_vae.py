@@ -6,8 +6,9 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.config import Params
+from pipeline.io import check_writable
 from pipeline.progress import progress
-from pipeline.stages.common import epoch_logger, open_stage, world_model_outputs
+from pipeline.stages.common import config_path, epoch_logger, open_stage, world_model_outputs
 from pipeline.worldmodel.fit import fit_vae
 from pipeline.worldmodel.training import save_vae
 
@@ -22,6 +23,7 @@ def run(
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
+    check_writable(out, config_path(out), metrics, history)
     with open_stage("train_vae", "train-vae", params, tracking=tracking) as run:
         with progress(params.vae.max_epochs, "train-vae", quiet=quiet, unit="epochs") as bar:
             fitted = fit_vae(
@@ -33,10 +35,11 @@ def run(
             )
         result = fitted.result
         summary: dict[str, Any] = {**result.metrics, **fitted.data}
-        save_vae(out, result, extra={"metrics": summary, "params": params.vae.model_dump()})
+        extra = {"metrics": summary, "params": params.vae.model_dump()}
         world_model_outputs(
-            "train_vae", run, params, out, metrics, history, summary, result.history
-        )
+            "train_vae", run, params, lambda path: save_vae(path, result, extra=extra),
+            out, metrics, history, summary, result.history,
+        )  # fmt: skip
         run.log_figure(fitted.figure(), "figures/reconstruction.png")
     return (
         f"wrote {out}: validation reconstruction MSE {result.metrics['val_recon_mse']:.4f} "

@@ -376,10 +376,18 @@ def test_resume_refuses_another_runs_checkpoint(tmp_path: Path) -> None:
         f"{checkpoint}: checkpoint of a different run (params.gamma differs); "
         "delete it or train without --resume"
     )
+
+
+def test_an_unreadable_checkpoint_is_set_aside_and_training_starts_afresh(tmp_path: Path) -> None:
+    """A damaged checkpoint must not block every later `dvc repro` (which passes --resume)."""
+    fresh = train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0)
+    checkpoint = tmp_path / "run.ckpt"
     checkpoint.write_bytes(b"not a checkpoint")
-    with pytest.raises(ValueError, match="not a readable agent checkpoint"):
-        train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0,
-                    checkpoint_path=checkpoint, resume=True)  # fmt: skip
+    with pytest.warns(UserWarning, match="not a readable agent checkpoint.*moved to"):
+        resumed = train_agent("dueling-dqn", TINY, TINY_ENV, None, None, seed=0,
+                              checkpoint_path=checkpoint, resume=True)  # fmt: skip
+    assert_same_weights(resumed.q_network, fresh.q_network)
+    assert (tmp_path / "run.ckpt.unreadable-0").read_bytes() == b"not a checkpoint"
 
 
 @pytest.mark.parametrize("bootstrap", [True, False])

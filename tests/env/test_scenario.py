@@ -151,8 +151,14 @@ def test_counter_based_draws_are_uniform_and_keyed() -> None:
 
 
 def test_impossible_room_gives_a_clear_error() -> None:
-    sim = Simulator(1, EnvParams(num_humans=60, room_size=3.0, spawn_margin=0.3))
-    with pytest.raises(RuntimeError, match="could not place 60 humans"):
+    # More discs than the room's area: refused with the parameters, in one line.
+    with pytest.raises(ValueError, match="env.num_humans: 60 humans and their goals cannot"):
+        EnvParams(num_humans=60, room_size=3.0, spawn_margin=0.3)
+    with pytest.raises(ValueError, match="at most"):
+        EnvParams(num_humans=100_000)
+    # Within the area but too crowded to draw discs that touch nothing: spawning says so.
+    sim = Simulator(1, EnvParams(num_humans=9, room_size=3.0, spawn_margin=0.3))
+    with pytest.raises(RuntimeError, match="could not place 9 humans"):
         sim.reset(seed=0)
 
 
