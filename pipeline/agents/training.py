@@ -57,6 +57,7 @@ from pipeline.env.core import Simulator, StepResult
 from pipeline.env.params import EnvParams
 from pipeline.env.rollout import Episode
 from pipeline.env.state import COLLISION_HUMAN, COLLISION_WALL, BatchState
+from pipeline.env.wrappers import goal_distance, progress_shaping
 from pipeline.io import atomic_path
 from pipeline.progress import progress
 from pipeline.resources import check_fits
@@ -107,14 +108,6 @@ def selection_seed(seed: int) -> int:
 
 
 # -- small pure helpers -----------------------------------------------------------------------
-
-
-def goal_distances(obs: np.ndarray) -> np.ndarray:
-    """Robot–goal centre distances (N,) in metres from observations (N, obs_dim).
-
-    The observation starts with the goal's position in the robot frame (paper_spec §2).
-    """
-    return np.hypot(obs[:, 0], obs[:, 1]).astype(np.float64)
 
 
 def episodes_to_solve(success: Sequence[bool] | np.ndarray, window: int, rate: float) -> int | None:
@@ -398,7 +391,7 @@ def train_agent(
         sim=sim,
         explore_rng=np.random.default_rng(explore_seed),
         features=features_of.reset(obs),
-        goal_distance=goal_distances(obs),
+        goal_distance=goal_distance(obs),
         episode_return=np.zeros(p.num_envs),
         episode_length=np.zeros(p.num_envs, dtype=np.int64),
         epsilon=p.epsilon_start,
@@ -440,8 +433,10 @@ def train_agent(
 
             # -- store -----------------------------------------------------------------------
             terminal = result.terminated if p.bootstrap_truncation else done
-            next_distance = goal_distances(result.obs)
-            shaped = result.reward + p.progress_reward * (state.goal_distance - next_distance)
+            next_distance = goal_distance(result.obs)
+            shaped = progress_shaping(
+                result.reward, state.goal_distance, next_distance, p.progress_reward
+            )
             state.replay.add(
                 *state.accumulator.push(
                     state.features, actions, shaped, step.next_features, terminal, done
@@ -450,7 +445,7 @@ def train_agent(
             state.features = step.features
             state.goal_distance = next_distance
             if step.first_obs is not None:
-                state.goal_distance[done] = goal_distances(step.first_obs)
+                state.goal_distance[done] = goal_distance(step.first_obs)
             state.env_steps += p.num_envs
             state.episode_return += result.reward
             state.episode_length += 1
