@@ -118,15 +118,9 @@ class Variant:
         obs_dim: int = 23,
         device: torch.device | str = "cpu",
     ) -> None:
-        options = options if options is not None else AgentParams()
-        self.options = options
+        self.options = options if options is not None else AgentParams()
         self.device = torch.device(device)
         self.obs_dim = int(obs_dim)
-        self.horizon = options.horizon
-        self.hidden_features = options.maspm_hidden_features
-        self.carry_imagined = options.carry_imagined
-        self.sort_humans = options.sort_humans
-        self.decode_latents = options.decode_latents
         self.vae: VAE | None = None
         self.lstm: LatentLSTM | None = None
         self.latent_dim = 0
@@ -155,7 +149,7 @@ class Variant:
             self.latent_dim = lstm.latent_dim
             self.hidden_dim = lstm.hidden_dim
         # Size of one latent as the Q-network sees it (see shown()).
-        self.shown_dim = self.obs_dim if self.decode_latents else self.latent_dim
+        self.shown_dim = self.obs_dim if self.options.decode_latents else self.latent_dim
         self.feature_dim = self._feature_dim()
         self.state: WorldModelState | None = None
         self.num_envs = 0
@@ -185,7 +179,7 @@ class Variant:
 
     def _obs_tensor(self, obs: np.ndarray | torch.Tensor) -> torch.Tensor:
         obs_t = torch.as_tensor(obs, dtype=torch.float32).to(self.device)
-        return sort_humans_by_distance(obs_t) if self.sort_humans else obs_t
+        return sort_humans_by_distance(obs_t) if self.options.sort_humans else obs_t
 
     def zero_state(self, batch: int) -> WorldModelState:
         """All-zero LSTM state for ``batch`` envs (what every episode starts from)."""
@@ -200,7 +194,7 @@ class Variant:
         entanglement. The same learner gets 81% from the decoded current latent and 74% from
         the latent itself (README, "Where the world-model variants lose").
         """
-        if not self.decode_latents or self.vae is None:
+        if not self.options.decode_latents or self.vae is None:
             return latents
         return self.vae.destandardize(self.vae.decode(latents))
 
@@ -342,10 +336,10 @@ class StepAheadFeatures(Variant):
         predicted, real = self.lstm.step(z, actions, state)
         real = WorldModelState(*real)
         imagined = real
-        for _ in range(self.horizon - 1):
+        for _ in range(self.options.horizon - 1):
             predicted, imagined = self.lstm.step(predicted, actions, imagined)
             imagined = WorldModelState(*imagined)
-        carried = imagined if self.carry_imagined else real
+        carried = imagined if self.options.carry_imagined else real
         return torch.cat([self.shown(z), imagined.h], dim=1), carried
 
 
@@ -404,12 +398,12 @@ class StepAheadMultiActionFeatures(_MultiActionFeatures):
     name = "2stepahead-maspm"
 
     def _feature_dim(self) -> int:
-        per_action = self.hidden_dim if self.hidden_features else self.shown_dim
+        per_action = self.hidden_dim if self.options.maspm_hidden_features else self.shown_dim
         return self.shown_dim + NUM_ACTIONS * per_action
 
     def compute(self, z, actions, state):
-        predicted, hidden, real = self._rollouts(z, actions, state, steps=self.horizon)
-        if self.hidden_features:
+        predicted, hidden, real = self._rollouts(z, actions, state, steps=self.options.horizon)
+        if self.options.maspm_hidden_features:
             return torch.cat([self.shown(z), hidden.flatten(1)], dim=1), real
         return self._shown_with_current(z, predicted), real
 

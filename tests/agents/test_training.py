@@ -445,10 +445,10 @@ def test_save_load_agent_and_evaluate(
     agent = load_agent(path, device="cpu")
     assert agent.variant_name == "maspm" and agent.params == result.params
     assert agent.extra["seed"] == 2 and agent.extra["note"] == "test"
-    assert agent.variant.sort_humans is result.params.sort_humans is True
+    assert agent.variant.options.sort_humans is result.params.sort_humans is True
     # The file brings back the input the Q-network was trained on: z and 4 predictions, each
     # the code or, decoded, a 23-d observation.
-    assert agent.variant.decode_latents is decode_latents
+    assert agent.variant.options.decode_latents is decode_latents
     slot = 23 if decode_latents else agent.variant.latent_dim
     assert agent.q_network.input_dim == agent.variant.feature_dim == 5 * slot
     assert_same_weights(agent.q_network, result.q_network)
