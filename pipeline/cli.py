@@ -407,10 +407,14 @@ def report(
     metrics: Annotated[Path, typer.Option(help="Machine-readable summary (JSON).")] = Path(
         "metrics/report.json"
     ),
+    document: Annotated[
+        list[Path] | None,
+        typer.Option(help="Markdown file whose results block gets the table (repeatable)."),
+    ] = None,
     no_tracking: NoTrackingOption = False,
 ) -> None:
-    """Table, paired tests, Pareto set, figures and the paper's claims checked (stage
-    `report`)."""
+    """Table, paired tests, Pareto set, figures and the paper's claims checked; the results
+    table also goes into the README's results block (stage `report`)."""
     params = _load(params_path, overlays, overrides)
     from pipeline.stages import report as stage
 
@@ -420,6 +424,7 @@ def report(
         training_dir=training_dir,
         out_dir=out_dir,
         metrics=metrics,
+        documents=tuple(document) if document is not None else None,
         tracking=not no_tracking,
     )
     typer.echo(message)

@@ -137,6 +137,10 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
     output = _dvc(repo, "repro")
     assert "Running stage 'evaluate@dueling-dqn'" in output and "Running stage 'report'" in output
     assert "Running stage 'train_agent" not in output
+    # ... and the README's results block says so (the rest of the README is untouched).
+    readme = (repo / "README.md").read_text()
+    assert "on the same 4 test scenarios" in readme and "| `orca` |" in readme
+    assert readme.endswith((ROOT / "README.md").read_text().split("<!-- /socnav-wm:results -->")[1])
 
     # An edit of the reward makes every stage that can execute it stale: the data, every
     # training, every evaluation, the baselines' included (their import closure has it).

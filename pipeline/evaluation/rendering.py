@@ -437,3 +437,47 @@ def _paper_section(
             )
         lines += _table(header, rows) + [""]
     return lines
+
+
+RESULTS_METRICS = (
+    "success",
+    "human_collision",
+    "discomfort",
+    "simulation_time",
+    "distance_travelled",
+    "personal_space_compliance",
+)
+"""The columns of the short results table (README); ``summary.md`` has every metric."""
+
+
+def results_table(
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    present: Sequence[str],
+    *,
+    num_scenarios: int,
+    scenario_seed: int | None,
+) -> str:
+    """The results of every evaluated method as one markdown table, with the line that says
+    what it is (the block :func:`replace_marked_block` writes into the README)."""
+    lines = [
+        f"Every method on the same {num_scenarios} test scenarios (scenario seed "
+        f"{scenario_seed}); agents: every training seed, greedy. Mean [95% interval]; "
+        "↑ higher is better, ↓ lower. Written by `socnav-wm report` "
+        "(all metrics and the paired tests: `reports/summary.md`).",
+        "",
+    ]
+    header = ["method"] + [f"{m} {_direction_mark(m)}" for m in RESULTS_METRICS]
+    rows = [[f"`{m}`"] + [fmt_ci(k, summaries[m][k]) for k in RESULTS_METRICS] for m in present]
+    return "\n".join(lines + _table(header, rows))
+
+
+def replace_marked_block(text: str, name: str, body: str) -> str:
+    """``text`` with what lies between ``<!-- socnav-wm:name -->`` and
+    ``<!-- /socnav-wm:name -->`` replaced by ``body``. Raises ValueError if the markers are
+    missing (a document that should carry the block must have them)."""
+    start, end = f"<!-- socnav-wm:{name} -->", f"<!-- /socnav-wm:{name} -->"
+    before, found, rest = text.partition(start)
+    _, found_end, after = rest.partition(end)
+    if not found or not found_end:
+        raise ValueError(f"no block {start} … {end} to fill")
+    return f"{before}{start}\n{body.rstrip()}\n{end}{after}"

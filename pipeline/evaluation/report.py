@@ -56,7 +56,12 @@ from pipeline.evaluation.figures import (
     smooth,
     training_curves_figure,
 )
-from pipeline.evaluation.rendering import render_summary, report_content
+from pipeline.evaluation.rendering import (
+    render_summary,
+    replace_marked_block,
+    report_content,
+    results_table,
+)
 from pipeline.evaluation.stats import mean_ci_crossed
 from pipeline.io import write_json_atomic, write_text_atomic
 from pipeline.metrics import ALL_METRICS, PAPER_METRICS
@@ -326,6 +331,7 @@ def build_report(
     alpha: float = 0.05,
     gif_size: int = 200,
     gif_max_frames: int = 60,
+    documents: Sequence[str | Path] = (),
 ) -> ReportResult:
     """Write the report of every evaluated method (see the module docstring).
 
@@ -346,6 +352,8 @@ def build_report(
         alpha: family-wise error rate of the paired tests.
         gif_size: GIF cell side, px.
         gif_max_frames: frames per scenario in the GIF (long episodes are subsampled).
+        documents: markdown files (the README) whose ``results`` block
+            (:func:`~pipeline.evaluation.rendering.replace_marked_block`) gets the results table.
 
     Returns:
         A :class:`ReportResult`.
@@ -466,6 +474,12 @@ def build_report(
     write_json_atomic(pareto_path, {**pareto, "means": {m: means[m] for m in present}})
     write_json_atomic(claims_path, {r.claim.claim_id: r.to_dict() for r in claims})
     write_json_atomic(metrics_path, content)
+    table = results_table(
+        summaries, present, num_scenarios=num_scenarios, scenario_seed=scenario_seed
+    )
+    for document in map(Path, documents):  # the README's results block, and the docs'
+        text = replace_marked_block(document.read_text(encoding="utf-8"), "results", table)
+        write_text_atomic(document, text)
     return ReportResult(
         summary_path=summary_path,
         pareto_path=pareto_path,

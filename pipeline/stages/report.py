@@ -16,9 +16,12 @@ def run(
     training_dir: Path = Path("data/training"),
     out_dir: Path = Path("reports"),
     metrics: Path = Path("metrics/report.json"),
+    documents: tuple[Path, ...] | None = None,
     tracking: bool = True,
 ) -> str:
     r = params.report
+    if documents is None:  # the README's results block, when run where there is a README
+        documents = tuple(p for p in (Path("README.md"),) if p.is_file())
     with open_stage("report", "report", params, tracking=tracking) as run:
         result = build_report(
             eval_dir,
@@ -33,6 +36,7 @@ def run(
             solved_window=params.agent.solved_window,
             solved_success_rate=params.agent.solved_success_rate,
             alpha=r.alpha,
+            documents=documents,
         )
         for claim, verdict in result.verdicts.items():
             run.set_tag(f"claim.{claim}", verdict)
