@@ -299,8 +299,10 @@ def test_stage_functions_run_without_the_cli(tmp_path: Path) -> None:
 def test_sigterm_ends_the_run_killed_and_leaves_no_output(workdir: Path) -> None:
     """kill (SIGTERM) mid-stage: exit 143, the MLflow run KILLED (not RUNNING forever), and
     neither the output nor a temporary of it left behind."""
+    import contextlib
     import os
     import signal
+    import sqlite3
     import subprocess
     import sys
     import time
@@ -309,27 +311,34 @@ def test_sigterm_ends_the_run_killed_and_leaves_no_output(workdir: Path) -> None
 
     cli = [sys.executable, "-c", "from pipeline.cli import app; app()"]
     process = subprocess.Popen(
-        [*cli, "collect", "--quiet", "--set", "collect.episodes=1000000"],
+        [*cli, "collect", "--quiet", "--set", "collect.episodes=200000"],
         env={**os.environ, "OMP_NUM_THREADS": "1"},
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
-    client = MlflowClient()
-    deadline = time.monotonic() + 120
-    runs: list = []
-    while time.monotonic() < deadline and not runs:
+    # Wait for the child's run, reading the database without touching its schema (a second
+    # process creating MLflow's tables at the same time would race the child).
+    database = workdir / "mlflow.db"
+    deadline = time.monotonic() + 180
+    running: list = []
+    while time.monotonic() < deadline and not running and process.poll() is None:
         time.sleep(0.5)
-        experiment = (workdir / "mlflow.db").exists() and client.get_experiment_by_name("socnav-wm")
-        if experiment:
-            runs = client.search_runs([experiment.experiment_id])
-    assert runs and runs[0].info.status == "RUNNING", process.stderr
+        if database.exists():
+            uri = f"file:{database}?mode=ro"
+            with (
+                contextlib.suppress(sqlite3.Error),
+                contextlib.closing(sqlite3.connect(uri, uri=True)) as connection,
+            ):
+                query = "SELECT run_uuid FROM runs WHERE status = 'RUNNING'"
+                running = connection.execute(query).fetchall()
+    assert running, process.stderr.read() if process.poll() is not None else "no run"
     time.sleep(1.0)  # inside the collection loop
     process.send_signal(signal.SIGTERM)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 128 + signal.SIGTERM, stderr
     assert stderr.strip().splitlines()[-1].startswith("error: terminated")
-    assert client.get_run(runs[0].info.run_id).info.status == "KILLED"
+    assert MlflowClient().get_run(running[0][0]).info.status == "KILLED"
     leftovers = (
         [p.name for p in (workdir / "data").glob("*")] if (workdir / "data").exists() else []
     )
