@@ -432,6 +432,37 @@ def report(
 
 @app.command()
 @friendly_errors
+def check(
+    rerun: Annotated[Path, typer.Argument(help="metrics/eval of a rerun (another clone).")],
+    committed: Annotated[Path, typer.Option(help="The committed evaluation metrics.")] = Path(
+        "metrics/eval"
+    ),
+) -> None:
+    """Compare a rerun's test metrics with the committed ones: each mean within the other's 95%
+    interval (what reproduces across machines), or identical (same CPU, build and threads)."""
+    from pipeline.evaluation.reproduce import compare_runs
+
+    checks = compare_runs(committed, rerun)
+    rows = [
+        {
+            "method": c.method,
+            "metric": c.metric,
+            "committed": f"{c.committed['mean']:.4g} [{c.committed['low']:.4g}, "
+            f"{c.committed['high']:.4g}]",
+            "rerun": f"{c.rerun['mean']:.4g} [{c.rerun['low']:.4g}, {c.rerun['high']:.4g}]",
+            "verdict": "identical" if c.identical else "agrees" if c.agrees else "DIFFERS",
+        }
+        for c in checks
+    ]
+    _print_table(rows, f"socnav-wm check {rerun} against {committed}", {})
+    differs = sum(not c.agrees for c in checks)
+    typer.echo(f"{len(checks) - differs} of {len(checks)} agree within the 95% intervals")
+    if differs:
+        raise typer.Exit(code=1)
+
+
+@app.command()
+@friendly_errors
 def deps(
     check: Annotated[
         Path | None,
