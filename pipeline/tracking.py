@@ -23,7 +23,7 @@ import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -246,6 +246,12 @@ class Run:
     def flush(self) -> None:
         """Send buffered metrics now."""
 
+    def link_runs(self, key: str, stages: Sequence[str]) -> list[str]:
+        """Tag this run with the ids of the latest finished run of each of ``stages`` (e.g. the
+        trainings whose weights an evaluation uses), as ``key`` = comma-separated ids; returns
+        the ids (empty when tracking is off or no such run exists)."""
+        return []
+
 
 class _MlflowRun(Run):
     """A live MLflow run, written through an explicit ``MlflowClient`` (no global state)."""
@@ -298,6 +304,21 @@ class _MlflowRun(Run):
 
     def set_tag(self, key: str, value: Any) -> None:
         self._client.set_tag(self.run_id, key, _truncate(str(value), _MAX_TAG_VALUE))
+
+    def link_runs(self, key: str, stages: Sequence[str]) -> list[str]:
+        experiment = self._client.get_run(self.run_id).info.experiment_id
+        ids = []
+        for stage in stages:
+            found = self._client.search_runs(
+                [experiment],
+                filter_string=f"tags.stage = '{stage}' and attributes.status = 'FINISHED'",
+                order_by=["attributes.end_time DESC"],
+                max_results=1,
+            )
+            ids += [run.info.run_id for run in found]
+        if ids:
+            self.set_tag(key, ",".join(ids))
+        return ids
 
 
 @contextlib.contextmanager

@@ -205,6 +205,19 @@ def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
     evaluations = {r.data.tags["method"]: r for r in _runs("evaluate/")}
     assert set(evaluations) == {"dueling-dqn", "2stepahead-maspm", "orca", "sfm"}
     assert "success" in evaluations["orca"].data.metrics
+    # For comparing methods in MLflow: the method and variant as params, per-seed metrics, the
+    # evaluation linked to the trainings whose weights it used, the machine it ran on.
+    agent_eval = evaluations["dueling-dqn"]
+    assert agent_eval.data.params["method"] == "dueling-dqn"
+    assert {"seed-0.success", "seed-1.success"} <= set(agent_eval.data.metrics)
+    trained = {r.data.tags["stage"]: r.info.run_id for r in agents}
+    assert agent_eval.data.tags["training_runs"].split(",") == [
+        trained["train-agent/dueling-dqn/seed-0"], trained["train-agent/dueling-dqn/seed-1"]
+    ]  # fmt: skip
+    assert agents[0].data.params["variant"] == agents[0].data.tags["variant"]
+    assert "machine.cpu" in agents[0].data.tags and "machine.torch_threads" in agents[0].data.tags
+    experiment = client.get_experiment_by_name("socnav-wm")
+    assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
     (report_run,) = _runs("report")
     assert any(k.startswith("claim.") for k in report_run.data.tags)
     figures = {a.path for a in client.list_artifacts(report_run.info.run_id, "figures")}

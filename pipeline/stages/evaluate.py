@@ -64,6 +64,10 @@ def run(
         content = evaluation_metrics(result)
         run.set_tag("method", method)
         run.log_params({"method": method})
+        if agent_paths:  # the training runs whose weights this evaluation used
+            run.link_runs(
+                "training_runs", [f"train-agent/{method}/seed-{s}" for s in sorted(agent_paths)]
+            )
         run.log_metrics({m: v["mean"] for m, v in content["metrics"].items()})
         run.log_metrics({f"{m}_ci_low": v["low"] for m, v in content["metrics"].items()})
         run.log_metrics({f"{m}_ci_high": v["high"] for m, v in content["metrics"].items()})
