@@ -94,4 +94,3 @@ def predict_positions(
             velocity = rotate_vectors(velocity, w[:, k], dt)
         out[:, k] = current
     return out
-
