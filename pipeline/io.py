@@ -25,6 +25,7 @@ __all__ = [
     "OutputError",
     "atomic_path",
     "check_writable",
+    "nearest_existing",
     "outputs_together",
     "write_bytes_atomic",
     "write_json_atomic",
@@ -97,14 +98,21 @@ def remove_stale_temporaries(target: Path) -> list[Path]:
     return removed
 
 
+def nearest_existing(path: str | os.PathLike[str]) -> Path:
+    """``path`` resolved, or its nearest ancestor that exists (what a writer would create
+    the missing levels under)."""
+    existing = Path(path).resolve()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    return existing
+
+
 def check_writable(*targets: str | os.PathLike[str]) -> None:
     """Fail before any work when an output could not be written: for each target, its nearest
     existing ancestor must be a writable directory (the rest is created). Raises
     :class:`OutputError` with one line naming the target."""
     for target in map(Path, targets):
-        existing = target.parent.resolve()
-        while not existing.exists() and existing != existing.parent:
-            existing = existing.parent
+        existing = nearest_existing(target.parent)
         if not existing.is_dir():
             raise OutputError(f"{target}: cannot be written ({existing} is not a directory)")
         if not os.access(existing, os.W_OK | os.X_OK):
@@ -126,15 +134,9 @@ def outputs_together(*targets: str | os.PathLike[str]) -> Iterator[list[Path]]:
     temporaries: list[Path] = []
     with contextlib.ExitStack() as stack:
         for path in paths:
-            temporaries.append(stack.enter_context(_deferred(path)))
+            temporaries.append(stack.enter_context(atomic_path(path)))
         yield temporaries
-    # every _deferred context has published its temporary
-
-
-@contextmanager
-def _deferred(target: Path) -> Iterator[Path]:
-    with atomic_path(target) as tmp:
-        yield tmp
+    # leaving the stack has published every temporary, in order
 
 
 def _remove(path: Path) -> None:

@@ -43,9 +43,9 @@ def check_disk(
     (or its nearest existing parent) lives."""
     import shutil
 
-    existing = Path(folder).resolve()
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
+    from pipeline.io import nearest_existing
+
+    existing = nearest_existing(folder)
     free = shutil.disk_usage(existing).free
     if needed_bytes > free:
         raise ResourceError(

@@ -146,9 +146,9 @@ def _file_uri_path(uri: str) -> Path:
 
 
 def _check_directory(uri: str, directory: Path) -> None:
-    existing = directory.resolve()
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent  # MLflow creates the missing levels
+    from pipeline.io import nearest_existing
+
+    existing = nearest_existing(directory)  # MLflow creates the missing levels
     if not existing.is_dir():
         _fail(uri, f"{existing} is not a directory")
     if not os.access(existing, os.W_OK | os.X_OK):
