@@ -33,6 +33,7 @@ from pipeline.agents.baselines import OrcaBaselineParams, SfmBaselineParams
 from pipeline.agents.params import METHOD_NAMES, VARIANT_NAMES, AgentParams
 from pipeline.env.params import EnvParams, Section, describe_error
 from pipeline.io import atomic_path
+from pipeline.planning.params import PlanningParams
 
 Device = Literal["auto", "cpu", "cuda"]
 
@@ -232,6 +233,8 @@ class Params(Section):
     """The paired evaluation on test scenarios."""
     baselines: BaselinesParams = Field(default_factory=BaselinesParams)
     """ORCA and Social Force robots."""
+    planning: PlanningParams = Field(default_factory=PlanningParams)
+    """The planners (cv-mpc); see pipeline/planning/params.py."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
 
@@ -487,6 +490,7 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "train_agent": ("env", "agent"),
     "evaluate": ("env", "eval", "experiment.seeds"),
     "evaluate_baseline": ("env", "eval", "baselines"),
+    "evaluate_planner": ("env", "eval", "planning"),
     "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted

@@ -307,6 +307,7 @@ def test_params_dict_is_plain_and_json_able() -> None:
         "experiment",
         "eval",
         "baselines",
+        "planning",
         "report",
     ]
     assert data["env"]["human_policy"] == "mixed"

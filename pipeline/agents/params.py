@@ -18,6 +18,7 @@ from typing import Annotated, Any, ClassVar, Literal, Self
 from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, model_validator
 
 from pipeline.env.params import Section, describe_error
+from pipeline.planning.params import PLANNER_NAMES
 
 VARIANT_NAMES: tuple[str, ...] = (
     "dueling-dqn",
@@ -34,9 +35,13 @@ WORLD_MODEL_VARIANTS: tuple[str, ...] = VARIANT_NAMES[1:]
 BASELINE_NAMES: tuple[str, ...] = ("orca", "sfm")
 """The two classic controllers evaluated next to the agents (:mod:`pipeline.agents.baselines`)."""
 
-METHOD_NAMES: tuple[str, ...] = (*VARIANT_NAMES, *BASELINE_NAMES)
-"""Every evaluated method: the agents (paper order), then the baselines. Listed here, in a
-module without torch, so that the configuration can check method names cheaply."""
+PAPER_METHOD_NAMES: tuple[str, ...] = (*VARIANT_NAMES, *BASELINE_NAMES)
+"""The paper's seven methods: the agents (paper order), then the baselines."""
+
+METHOD_NAMES: tuple[str, ...] = (*PAPER_METHOD_NAMES, *PLANNER_NAMES)
+"""Every evaluated method: the paper's seven, then the planners
+(:mod:`pipeline.planning`). Listed here, in a module without torch, so that the configuration
+can check method names cheaply."""
 
 
 def check_variant(name: str) -> str:

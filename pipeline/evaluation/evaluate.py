@@ -36,7 +36,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from pipeline.agents.params import BASELINE_NAMES, METHOD_NAMES, VARIANT_NAMES
+from pipeline.agents.params import BASELINE_NAMES, METHOD_NAMES, PAPER_METHOD_NAMES, VARIANT_NAMES
 from pipeline.env.params import EnvParams
 from pipeline.env.rollout import Episode, run_episodes
 from pipeline.evaluation.stats import mean_ci_crossed
@@ -49,6 +49,7 @@ from pipeline.metrics import (
     Trajectory,
     episode_metrics,
 )
+from pipeline.planning.params import PLANNER_NAMES, PlanningParams
 from pipeline.progress import progress
 
 __all__ = [
@@ -57,6 +58,8 @@ __all__ = [
     "BASELINE_SEED",
     "EPISODE_KEY_COLUMNS",
     "METHODS",
+    "PAPER_METHODS",
+    "PLANNER_METHODS",
     "OUTCOMES",
     "EvaluationResult",
     "episode_from_trajectories",
@@ -74,7 +77,13 @@ __all__ = [
 ]
 
 METHODS: tuple[str, ...] = METHOD_NAMES
-"""The seven methods, agents first (paper order), then the baselines."""
+"""Every method: the agents (paper order), the baselines, then the planners."""
+
+PAPER_METHODS: tuple[str, ...] = PAPER_METHOD_NAMES
+"""The paper's seven methods (the agents, then the baselines)."""
+
+PLANNER_METHODS: tuple[str, ...] = PLANNER_NAMES
+"""The planners (:mod:`pipeline.planning`): deterministic, evaluated once like a baseline."""
 
 AGENT_METHODS: tuple[str, ...] = VARIANT_NAMES
 """The five learned methods (one agent file per training seed)."""
@@ -83,7 +92,8 @@ BASELINE_METHODS: tuple[str, ...] = BASELINE_NAMES
 """The two classic controllers (deterministic: evaluated once)."""
 
 BASELINE_SEED = -1
-"""``training_seed`` of a baseline's rows: it has no training seed (it is not trained)."""
+"""``training_seed`` of a baseline's (or a planner's) rows: it has no training seed (it is not
+trained)."""
 
 EPISODE_KEY_COLUMNS: tuple[str, ...] = ("method", "training_seed", "scenario_id")
 """Columns identifying an episode, in both tables."""
@@ -469,6 +479,7 @@ def evaluate_method(
     episodes: int,
     agent_paths: Mapping[int, str | Path] | None = None,
     baseline_overrides: Mapping[str, Any] | None = None,
+    planning: PlanningParams | None = None,
     device: str = "cpu",
     batch_size: int = 500,
     quiet: bool = True,
@@ -484,6 +495,8 @@ def evaluate_method(
             evaluated (greedy, ε = 0). Ignored (must be empty) for a baseline.
         baseline_overrides: for a baseline, parameters replacing its defaults
             (``params.yaml``'s ``baselines.<name>``). Must be empty for an agent.
+        planning: for a planner, its parameters (``params.yaml``'s ``planning``; default: the
+            code's defaults). Must be None for another method.
         device: where the agents' networks run (``cpu``, ``cuda``, ``auto``).
         batch_size: scenarios simulated together (all of a seed's scenarios in one batch by
             default); the results do not depend on it.
@@ -506,12 +519,32 @@ def evaluate_method(
     episode_tables: list[pa.Table] = []
     trajectory_tables: list[pa.Table] = []
     settings: dict[str, Any] = {}
+    seeds: tuple[int, ...]
+    runs: list[Episode]
 
     def record(seed: int, runs: list[Episode]) -> None:
         episode_tables.append(episodes_table(method, seed, runs, env_params))
         trajectory_tables.append(trajectories_table(method, seed, runs, env_params.num_humans))
 
-    if method in BASELINE_METHODS:
+    if planning is not None and method not in PLANNER_METHODS:
+        raise ValueError(f"method {method!r} is not a planner: planning parameters do not apply")
+    if method in PLANNER_METHODS:
+        if agent_paths or baseline_overrides:
+            raise ValueError(f"method {method!r} is a planner: it takes no agent files")
+        from pipeline.planning.models import ConstantVelocityModel
+        from pipeline.planning.mpc import Planner
+
+        planning = planning or PlanningParams()
+        settings["planning"] = planning.to_dict()
+        seeds = (BASELINE_SEED,)
+        runs = []
+        with progress(episodes, f"evaluate {method}", quiet=quiet, unit="episodes") as bar:
+            for chunk in _chunks(ids, batch_size):
+                planner = Planner(ConstantVelocityModel(env_params), planning, env_params)
+                runs += run_episodes(env_params, planner.policy(), scenario_seed, chunk)
+                bar.advance(chunk.size)
+        record(BASELINE_SEED, runs)
+    elif method in BASELINE_METHODS:
         if agent_paths:
             raise ValueError(f"method {method!r} is a baseline: it takes no agent files")
         from pipeline.agents.baselines import make_baseline
@@ -519,8 +552,8 @@ def evaluate_method(
         overrides = dict(baseline_overrides or {})
         baseline = make_baseline(method, **overrides)
         settings["baseline_overrides"] = overrides
-        seeds: tuple[int, ...] = (BASELINE_SEED,)
-        runs: list[Episode] = []
+        seeds = (BASELINE_SEED,)
+        runs = []
         with progress(episodes, f"evaluate {method}", quiet=quiet, unit="episodes") as bar:
             for chunk in _chunks(ids, batch_size):
                 runs += run_episodes(

@@ -45,6 +45,7 @@ METHOD_COLORS: dict[str, str] = {
     "2stepahead-maspm": "#d62728",
     "orca": "#7f7f7f",
     "sfm": "#8c564b",
+    "cv-mpc": "#17becf",
 }
 """One colour per method, the same in every figure."""
 

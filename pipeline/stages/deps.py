@@ -26,6 +26,7 @@ STAGE_MODULES: dict[str, str] = {
     "train_agent": "pipeline.stages.train_agent",
     "evaluate": "pipeline.stages.evaluate",
     "evaluate_baseline": "pipeline.stages.evaluate",
+    "evaluate_planner": "pipeline.stages.evaluate",
     "report": "pipeline.stages.report",
 }
 """``dvc.yaml`` stage name → the module its command runs."""

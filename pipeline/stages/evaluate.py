@@ -1,5 +1,5 @@
-"""Stages ``evaluate`` and ``evaluate_baseline``: one method, greedily, on the test scenarios
-(every training seed of an agent, ``experiment.seeds``)."""
+"""Stages ``evaluate``, ``evaluate_baseline`` and ``evaluate_planner``: one method, greedily, on
+the test scenarios (every training seed of an agent, ``experiment.seeds``)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pipeline.evaluation.evaluate import (
     AGENT_METHODS,
     BASELINE_METHODS,
     METHODS,
+    PLANNER_METHODS,
     evaluate_method,
     evaluation_metrics,
     write_evaluation,
@@ -30,7 +31,13 @@ def run(
 ) -> str:
     if method not in METHODS:
         raise ValueError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
-    stage = "evaluate_baseline" if method in BASELINE_METHODS else "evaluate"
+    stage = (
+        "evaluate_baseline"
+        if method in BASELINE_METHODS
+        else "evaluate_planner"
+        if method in PLANNER_METHODS
+        else "evaluate"
+    )
     episodes_path = out_dir / f"{method}.parquet"
     trajectories_path = out_dir / f"{method}-trajectories.parquet"
     metrics_path = metrics_dir / f"{method}.json"
@@ -55,6 +62,7 @@ def run(
             episodes=params.eval.episodes,
             agent_paths=agent_paths,
             baseline_overrides=overrides_of,
+            planning=params.planning if method in PLANNER_METHODS else None,
             device=params.eval.device,
             batch_size=params.eval.batch_size,
             quiet=quiet,

@@ -64,6 +64,28 @@ def rotate_vectors(vectors: np.ndarray, omega: np.ndarray, dt: float) -> np.ndar
     return np.stack([c * x + s * y, -s * x + c * y], axis=-1)
 
 
+def human_velocities(
+    previous_obs: np.ndarray, obs: np.ndarray, previous_action: np.ndarray, params: EnvParams
+) -> np.ndarray:
+    """Per-step velocities (B, 1 + H, 2) in the current robot frame: each human's displacement
+    between the two observations after undoing the robot's motion ``previous_action``; zero for
+    the goal, which never moves."""
+    v, w = commands_of(previous_action, params)
+    current = positions(obs)
+    velocity = np.zeros_like(current)
+    seen_from_now = ego_step(positions(previous_obs), v, w, params.dt)
+    velocity[:, 1:] = current[:, 1:] - seen_from_now[:, 1:]
+    return velocity
+
+
+def advance(
+    points: np.ndarray, velocity: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of points moving at ``velocity`` (per step, robot frame) while the robot executes
+    ``(v, ω)``: the new robot-frame points and velocities (the world velocity is kept)."""
+    return ego_step(points + velocity, v, omega, dt), rotate_vectors(velocity, omega, dt)
+
+
 def predict_positions(
     name: str,
     previous_obs: np.ndarray,
@@ -79,18 +101,15 @@ def predict_positions(
     """
     if name not in PREDICTORS:
         raise ValueError(f"predictor: unknown {name!r}; expected one of {', '.join(PREDICTORS)}")
-    dt = params.dt
     current = positions(obs)
-    velocity = np.zeros_like(current)  # robot frame, per step; the goal never moves
     if name == "constant-velocity":
-        v, w = commands_of(previous_action, params)
-        seen_from_now = ego_step(positions(previous_obs), v, w, dt)
-        velocity[:, 1:] = current[:, 1:] - seen_from_now[:, 1:]
+        velocity = human_velocities(previous_obs, obs, previous_action, params)
+    else:
+        velocity = np.zeros_like(current)
     v, w = commands_of(future_actions, params)
     out = np.empty((current.shape[0], future_actions.shape[1], *current.shape[1:]))
     for k in range(future_actions.shape[1]):
         if name != "copy-last":
-            current = ego_step(current + velocity, v[:, k], w[:, k], dt)
-            velocity = rotate_vectors(velocity, w[:, k], dt)
+            current, velocity = advance(current, velocity, v[:, k], w[:, k], params.dt)
         out[:, k] = current
     return out

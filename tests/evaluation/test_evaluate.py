@@ -49,8 +49,12 @@ def assert_tables_equal(a: pa.Table, b: pa.Table) -> None:
 def test_method_names_match_the_rest_of_the_project():
     from pipeline.agents.baselines import BASELINES
     from pipeline.agents.params import VARIANT_NAMES
+    from pipeline.evaluation.evaluate import PAPER_METHODS, PLANNER_METHODS
+    from pipeline.planning.params import PLANNER_NAMES
 
-    assert METHODS == VARIANT_NAMES + BASELINE_METHODS
+    assert PAPER_METHODS == VARIANT_NAMES + BASELINE_METHODS
+    assert METHODS == PAPER_METHODS + PLANNER_METHODS
+    assert PLANNER_METHODS == PLANNER_NAMES
     assert AGENT_METHODS == VARIANT_NAMES
     assert set(BASELINE_METHODS) == set(BASELINES)
 

@@ -18,7 +18,12 @@ from scipy import stats as scipy_stats
 from pipeline.evaluation import paper
 from pipeline.evaluation.claims import VERDICTS, check_claims
 from pipeline.evaluation.comparisons import clustered_mcnemar, compare, pareto_analysis
-from pipeline.evaluation.evaluate import AGENT_METHODS, BASELINE_SEED, EvaluationResult
+from pipeline.evaluation.evaluate import (
+    AGENT_METHODS,
+    BASELINE_SEED,
+    PLANNER_METHODS,
+    EvaluationResult,
+)
 from pipeline.evaluation.rendering import fmt_ci
 from pipeline.evaluation.report import (
     MethodEvaluation,
@@ -119,6 +124,7 @@ def test_build_report_writes_every_file(report):
         "2stepahead",
         "maspm",
         "2stepahead-maspm",
+        "cv-mpc",
     ]
     assert content["scenario_seed"] == SCENARIO_SEED and content["episodes"] == EPISODES
     assert set(content["comparisons"]) == {"orca", "sfm"}
@@ -145,7 +151,7 @@ def test_build_report_writes_every_file(report):
         "## Figures",
     ):
         assert heading in summary
-    assert "**Not evaluated: wm-dueling-dqn, 2stepahead, maspm, 2stepahead-maspm.**" in summary
+    assert "**Not evaluated: wm-dueling-dqn, 2stepahead, maspm, 2stepahead-maspm, cv-mpc.**" in summary
     assert "![scenarios.gif](figures/scenarios.gif)" in summary
 
 
@@ -214,9 +220,9 @@ def test_report_with_only_baselines_says_what_is_missing(baseline_results, tmp_p
         gif_scenarios=(0,), gif_size=64, gif_max_frames=5,
     )  # fmt: skip
     assert result.present == ["orca", "sfm"]
-    assert result.absent == list(AGENT_METHODS)
+    assert result.absent == [*AGENT_METHODS, *PLANNER_METHODS]
     summary = result.summary_path.read_text()
-    assert "**Not evaluated: " + ", ".join(AGENT_METHODS) + ".**" in summary
+    assert "**Not evaluated: " + ", ".join(result.absent) + ".**" in summary
     assert "`dueling-dqn` was not evaluated: no paired comparisons." in summary
     assert "no training logs" in summary
     assert [p.name for p in result.figures] == ["histograms.png", "means.png", "scenarios.gif"]

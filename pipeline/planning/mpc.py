@@ -1,0 +1,133 @@
+"""Receding-horizon planning over the paper's four actions (stop, forward, left, right).
+
+At every step, for every episode at once:
+
+1. the candidates are every ``prefix_length``-action prefix (``4**prefix_length``), each
+   followed by each continuation (``goal``: turn towards the predicted goal when it is more
+   than half a turn step off the heading, else advance; ``stop``; ``forward``) up to
+   ``horizon`` steps;
+2. the model imagines all of them in one batch (``episodes × candidates`` futures), one step
+   at a time;
+3. each future is scored on its predicted goal and humans, step ``k`` weighted ``γᵏ``:
+   progress towards the goal (m) × ``progress_weight``, − ``discomfort_cost`` when a human is
+   nearer than ``discomfort_distance`` surface to surface, − ``collision_cost`` (and the future
+   ends) at a contact, + ``goal_reward`` (and the future ends) at the goal;
+4. the first action of the best candidate is executed (ties: the first in the table), and the
+   plan is made afresh at the next step.
+
+Walls are not in the observation, so a model that predicts from observations does not see them.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+
+import numpy as np
+
+from pipeline.env.core import NUM_ACTIONS
+from pipeline.env.params import EnvParams
+from pipeline.planning.models import PlanningModel
+from pipeline.planning.params import PlanningParams
+
+STOP, FORWARD, LEFT, RIGHT = range(NUM_ACTIONS)
+
+
+def prefixes(length: int) -> np.ndarray:
+    """Every action sequence of ``length`` steps, (4**length, length) int64, in lexicographic
+    order (so the first is all ``stop``)."""
+    return np.array(list(itertools.product(range(NUM_ACTIONS), repeat=length)), dtype=np.int64)
+
+
+def towards_goal(goal: np.ndarray, env_params: EnvParams) -> np.ndarray:
+    """The ``goal`` continuation's action (B,) for robot-frame goals (B, 2): rotate towards the
+    goal while its bearing exceeds half a turn step, else advance."""
+    bearing = np.arctan2(goal[:, 1], goal[:, 0])
+    half_turn = 0.5 * env_params.robot_max_rotation * env_params.dt
+    return np.where(bearing > half_turn, LEFT, np.where(bearing < -half_turn, RIGHT, FORWARD))
+
+
+class Planner:
+    """The planner of the module docstring, with ``model`` as its predictor.
+
+    Args:
+        model: a :class:`~pipeline.planning.models.PlanningModel`, following the episodes.
+        params: the ``planning`` section.
+        env_params: the scenarios' parameters (radii, goal and discomfort distances, turn step).
+    """
+
+    def __init__(self, model: PlanningModel, params: PlanningParams, env_params: EnvParams):
+        self.model, self.params, self.env_params = model, params, env_params
+        self.prefixes = prefixes(params.prefix_length)
+        self.num_candidates = len(self.prefixes) * len(params.continuations)
+
+    def scores(self, goal_now: np.ndarray) -> np.ndarray:
+        """(N, candidates) predicted returns from the model's present, where the goal is at
+        ``goal_now`` (N, 2) in the robot frame; candidate ``p · len(continuations) + c`` is
+        prefix ``p`` followed by continuation ``c``."""
+        p, e = self.params, self.env_params
+        num_episodes = len(goal_now)
+        conts = len(p.continuations)
+        s = self.num_candidates
+        rollout = self.model.rollout(s)
+        batch = num_episodes * s
+        prefix_of = np.tile(np.repeat(np.arange(len(self.prefixes)), conts), num_episodes)
+        continuation_of = np.tile(np.arange(conts), len(self.prefixes) * num_episodes)
+        fixed = {"stop": STOP, "forward": FORWARD}
+        score = np.zeros(batch)
+        alive = np.ones(batch, dtype=bool)
+        goal = np.repeat(np.asarray(goal_now, dtype=np.float64), s, axis=0)
+        goal_distance = np.hypot(goal[:, 0], goal[:, 1])
+        contact = e.robot_radius + e.human_radius + p.safety_margin
+        for k in range(p.horizon):
+            if k < p.prefix_length:
+                actions = self.prefixes[prefix_of, k]
+            else:
+                actions = np.empty(batch, dtype=np.int64)
+                for c, name in enumerate(p.continuations):
+                    rows = continuation_of == c
+                    if name == "goal":
+                        actions[rows] = towards_goal(goal[rows], e)
+                    else:
+                        actions[rows] = fixed[name]
+            predicted = rollout.step(actions)
+            goal = predicted[:, 0]
+            new_goal_distance = np.hypot(goal[:, 0], goal[:, 1])
+            centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
+            collided = centre < contact
+            reached = ~collided & (new_goal_distance < e.success_distance)
+            uncomfortable = centre - e.robot_radius - e.human_radius < e.discomfort_distance
+            gain = (
+                p.progress_weight * (goal_distance - new_goal_distance)
+                - p.discomfort_cost * uncomfortable
+                - p.collision_cost * collided
+                + p.goal_reward * reached
+            )
+            score += np.where(alive, p.discount**k * gain, 0.0)
+            alive &= ~(collided | reached)
+            goal_distance = new_goal_distance
+        return score.reshape(num_episodes, s)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """The first action (N,) of each episode's best candidate, from the model's present
+        (whose observation is ``obs``)."""
+        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2])
+        best = scores.argmax(axis=1)  # the first of equal scores
+        return self.prefixes[best // len(self.params.continuations), 0]
+
+    def policy(self) -> Callable[[np.ndarray], np.ndarray]:
+        """A policy ``obs (N, obs_dim) → actions (N,)`` for episodes that start together (what
+        :func:`pipeline.env.rollout.run_episodes` calls): its first call starts the model on
+        the episodes, every later call is their next step."""
+        last: list[np.ndarray] = []
+
+        def act(obs: np.ndarray) -> np.ndarray:
+            if last:
+                self.model.observe(obs, last[0])
+            else:
+                self.model.reset(obs)
+            actions = self.act(obs)
+            last[:] = [actions]
+            return actions
+
+        return act

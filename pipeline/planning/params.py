@@ -1,0 +1,72 @@
+"""The planners' parameters (``params.yaml``'s ``planning`` section): a light module, no torch.
+
+:mod:`pipeline.planning.mpc` explains the planner; each field below says what it changes.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, ClassVar, Literal
+
+from pydantic import AfterValidator, BeforeValidator, Field
+
+from pipeline.env.params import Section
+
+PLANNER_NAMES: tuple[str, ...] = ("cv-mpc",)
+"""The planning methods: receding-horizon control over the paper's four actions with a model
+that predicts the goal and the humans (``cv-mpc``: constant velocity, no learning)."""
+
+Continuation = Literal["goal", "stop", "forward"]
+CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")
+
+
+def _as_tuple(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+def _distinct(value: tuple[str, ...]) -> tuple[str, ...]:
+    if not value:
+        raise ValueError("expected at least one continuation")
+    if len(set(value)) != len(value):
+        raise ValueError(f"a continuation is listed twice in {list(value)!r}")
+    return value
+
+
+Continuations = Annotated[
+    tuple[Continuation, ...], BeforeValidator(_as_tuple), AfterValidator(_distinct)
+]
+
+
+def _finite(default: float, **bounds: float) -> Any:
+    return Field(default, allow_inf_nan=False, **bounds)
+
+
+class PlanningParams(Section):
+    """Receding-horizon planning over the paper's four actions (pipeline/planning/mpc.py).
+
+    At every step the planner scores every candidate, a ``prefix_length``-action prefix (all
+    ``4**prefix_length`` of them) followed by one of the ``continuations`` up to ``horizon``
+    steps, on the model's predicted goal and humans, and executes the first action of the best.
+    """
+
+    SECTION: ClassVar[str] = "planning"
+
+    horizon: int = Field(12, gt=0)
+    """Steps each candidate is predicted ahead."""
+    prefix_length: int = Field(3, gt=0, le=5)
+    """Length of the exhaustive prefix (4**prefix_length candidates; at most 5, 1,024)."""
+    continuations: Continuations = CONTINUATIONS
+    """What follows a prefix: ``goal`` (turn towards the predicted goal, then advance), ``stop``,
+    ``forward``."""
+    discount: float = _finite(0.95, gt=0, le=1)
+    """Weight γᵏ of step k's terms: the same outcome sooner scores higher."""
+    goal_reward: float = _finite(10.0, ge=0)
+    """Added once when the predicted robot reaches the goal (the candidate's end)."""
+    collision_cost: float = _finite(10.0, ge=0)
+    """Subtracted once when a predicted human touches the robot (the candidate's end)."""
+    discomfort_cost: float = _finite(0.1, ge=0)
+    """Subtracted per step where a predicted human is nearer than the scenario's
+    ``discomfort_distance`` (0.9999 m, the paper's) surface to surface."""
+    progress_weight: float = _finite(1.0, ge=0)
+    """Weight of each step's progress towards the goal (metres)."""
+    safety_margin: float = _finite(0.0, ge=0)
+    """Added to the radii when testing a predicted contact (m)."""

@@ -1,0 +1,103 @@
+"""The planner (pipeline/planning/mpc.py) and its constant-velocity model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config import ConfigError, load_params
+from pipeline.env.params import EnvParams
+from pipeline.evaluation.evaluate import BASELINE_SEED, evaluate_method
+from pipeline.planning.models import ConstantVelocityModel
+from pipeline.planning.mpc import FORWARD, LEFT, RIGHT, STOP, Planner, prefixes, towards_goal
+from pipeline.planning.params import PlanningParams
+from pipeline.worldmodel.ego import predict_positions
+
+ENV = EnvParams()
+
+
+def observation(goal: tuple[float, float], humans: list[tuple[float, float]]) -> np.ndarray:
+    """One robot-frame observation: the goal, then each human's position (other fields 0)."""
+    obs = np.zeros(2 + 7 * ENV.num_humans)
+    obs[:2] = goal
+    for i, xy in enumerate(humans):
+        obs[2 + 7 * i : 4 + 7 * i] = xy
+        obs[6 + 7 * i] = ENV.human_radius
+    return obs[None]
+
+
+def test_prefixes_are_every_sequence_once() -> None:
+    table = prefixes(3)
+    assert table.shape == (64, 3)
+    assert len({tuple(row) for row in table}) == 64
+    assert table[0].tolist() == [STOP, STOP, STOP]
+
+
+def test_towards_goal_turns_then_advances() -> None:
+    goals = np.array([[2.0, 0.0], [0.0, 2.0], [0.0, -2.0], [-2.0, 0.01]])
+    assert towards_goal(goals, ENV).tolist() == [FORWARD, LEFT, RIGHT, LEFT]
+
+
+def test_constant_velocity_model_rollout_matches_the_predictor() -> None:
+    rng = np.random.default_rng(0)
+    previous = rng.uniform(-4, 4, size=(5, 2 + 7 * ENV.num_humans))
+    current = rng.uniform(-4, 4, size=previous.shape)
+    last = rng.integers(0, 4, size=5)
+    future = rng.integers(0, 4, size=(5, 6))
+    model = ConstantVelocityModel(ENV)
+    model.reset(previous)
+    model.observe(current, last)
+    rollout = model.rollout(1)
+    steps = np.stack([rollout.step(future[:, k]) for k in range(6)], axis=1)
+    expected = predict_positions("constant-velocity", previous, current, last, future, ENV)
+    np.testing.assert_allclose(steps, expected, atol=1e-12)
+
+
+def test_planner_advances_on_a_free_path_and_waits_for_a_crossing_human() -> None:
+    far = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]
+    free = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV).policy()
+    assert free(observation((3.0, 0.0), far)).tolist() == [FORWARD]
+
+    # A human ahead-left crossing the robot's path at 0.3 m/s: one step forward meets it
+    # (0.63 m apart, centre to centre, under the 0.66 m of the two radii); waiting does not.
+    planner = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV)
+    act = planner.policy()
+    first = [(0.7, 0.9), *far[1:]]
+    assert act(observation((3.0, 0.0), first)).tolist() == [FORWARD]  # no velocity yet
+    crossing = [(0.7, 0.6), *far[1:]]
+    # The robot stood still or turned in place, so the human's displacement is its own.
+    planner.model.reset(observation((3.0, 0.0), first))
+    planner.model.observe(observation((3.0, 0.0), crossing), np.array([STOP]))
+    scores = planner.scores(np.array([[3.0, 0.0]])).reshape(64, -1)
+    forward_first = scores[prefixes(3)[:, 0] == FORWARD].max()
+    waiting = scores[prefixes(3)[:, 0] != FORWARD].max()
+    assert waiting > forward_first
+    assert planner.act(observation((3.0, 0.0), crossing)).tolist() != [FORWARD]
+
+
+def test_cv_mpc_evaluation_runs_once_without_a_training_seed() -> None:
+    params = PlanningParams(horizon=4, prefix_length=1)
+    result = evaluate_method(
+        "cv-mpc", env_params=ENV, scenario_seed=3, episodes=3, planning=params, batch_size=2
+    )
+    assert result.training_seeds == (BASELINE_SEED,)
+    assert result.episodes.num_rows == 3
+    assert result.settings["planning"]["horizon"] == 4
+    with pytest.raises(ValueError, match="not a planner"):
+        evaluate_method("orca", env_params=ENV, scenario_seed=3, episodes=1, planning=params)
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("planning.horizon=0", "planning.horizon"),
+        ("planning.prefix_length=6", "planning.prefix_length"),
+        ("planning.continuations=[goal, goal]", "planning.continuations"),
+        ("planning.discount=1.5", "planning.discount"),
+    ],
+)
+def test_bad_planning_values_name_their_key(tmp_path, override: str, key: str) -> None:
+    path = tmp_path / "params.yaml"
+    path.write_text("seed: 0\n")
+    with pytest.raises(ConfigError, match=key):
+        load_params(path, [override])
