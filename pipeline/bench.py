@@ -280,3 +280,72 @@ def bench_train(
         "env_steps_per_cpu_s": env_rate,
         "updates_per_cpu_s": update_rate,
     }
+
+
+CONTENTION_STAGE_SETTINGS: tuple[str, ...] = (
+    "collect.episodes=300",
+    "vae.max_epochs=3",
+    "vae.patience=3",
+    "vae.device=cpu",
+)
+"""The ``train-vae`` run of :func:`bench_contention`: the shipped VAE, three epochs over 300
+random episodes (a few CPU-seconds)."""
+
+
+def _child_cpu_seconds(command: list[str], cwd: str, env: dict[str, str]) -> tuple[float, float]:
+    """(CPU-seconds, wall seconds) of one child process run to its end (``os.wait4``'s rusage:
+    every thread of the child, user + system)."""
+    import subprocess
+
+    start = time.perf_counter()
+    child = subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(child.pid, 0)
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if child.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} exited with status {child.returncode}")
+    return usage.ru_utime + usage.ru_stime, time.perf_counter() - start
+
+
+def bench_contention(threads: tuple[int, ...], hogs: int, repeats: int = 1) -> list[dict[str, Any]]:
+    """CPU-seconds of the ``train-vae`` stage alone and beside ``hogs`` busy processes
+    (``yes > /dev/null``), for each torch thread count.
+
+    A stage whose threads spin while waiting for a core (OpenMP's busy wait) burns CPU-seconds
+    the work does not need when the cores are shared; the ratio says by how much. The stage
+    runs as its own process (``socnav-wm train-vae --no-tracking``) in a temporary folder, on
+    data that ``socnav-wm collect`` writes there first. Each row is the fastest of ``repeats``.
+    """
+    import subprocess
+    import sys
+    import tempfile
+
+    cli = [sys.executable, "-m", "pipeline.cli"]
+    settings = [f"--set={s}" for s in CONTENTION_STAGE_SETTINGS]
+    env = {k: v for k, v in os.environ.items() if k != "OMP_NUM_THREADS"}
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="socnav-wm-contention-") as work:
+        open(os.path.join(work, "params.yaml"), "w").close()  # every default
+        _child_cpu_seconds([*cli, "collect", "--no-tracking", "--quiet", *settings], work, env)
+        for n in threads:
+            stage = [*cli, "train-vae", "--no-tracking", "--quiet", f"--threads={n}", *settings]
+            alone = min(_child_cpu_seconds(stage, work, env) for _ in range(repeats))
+            busy = [subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) for _ in range(hogs)]
+            try:
+                shared = min(_child_cpu_seconds(stage, work, env) for _ in range(repeats))
+            finally:
+                for hog in busy:
+                    hog.kill()
+                    hog.wait()
+            rows.append(
+                {
+                    "stage": "train-vae",
+                    "threads": n,
+                    "hogs": hogs,
+                    "cpu_s_alone": alone[0],
+                    "cpu_s_shared": shared[0],
+                    "ratio": shared[0] / alone[0],
+                    "wall_s_alone": alone[1],
+                    "wall_s_shared": shared[1],
+                }
+            )
+    return rows

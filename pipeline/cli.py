@@ -677,6 +677,40 @@ def bench_train_command(
     )
 
 
+@bench_app.command("contention")
+@friendly_errors
+def bench_contention_command(
+    threads: Annotated[
+        list[int] | None,
+        typer.Option(help="Torch threads of the stage (repeatable; default 1 and all).", min=1),
+    ] = None,
+    hogs: Annotated[
+        int | None, typer.Option(help="Busy processes beside it (default: one per core).", min=1)
+    ] = None,
+    repeats: Annotated[int, typer.Option(min=1, help="Runs per cell; the fastest counts.")] = 1,
+) -> None:
+    """CPU-seconds of the train-vae stage alone and beside busy processes (`yes`), per thread
+    count: how much a shared machine inflates a stage's work."""
+    from pipeline.bench import bench_contention
+
+    cores = available_cores()
+    rows = bench_contention(tuple(threads or sorted({1, cores})), hogs or cores, repeats)
+    _print_table(
+        rows,
+        f"socnav-wm bench contention ({cores} cores; CPU-seconds of the stage process, "
+        "user + system, every thread)",
+        {
+            "threads": "d",
+            "hogs": "d",
+            "cpu_s_alone": ".1f",
+            "cpu_s_shared": ".1f",
+            "ratio": ".2f",
+            "wall_s_alone": ".1f",
+            "wall_s_shared": ".1f",
+        },
+    )
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

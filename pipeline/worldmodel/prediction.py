@@ -1,0 +1,236 @@
+"""How well a world model predicts, in metres: k-step open-loop errors against the no-learning
+predictors.
+
+The setup is how a planner uses a model. Episodes of one scenario seed run under a policy and
+are recorded. After ``warmup`` real steps (the models follow the real trajectory), each model is
+rolled out open loop for ``k = 1…horizon`` steps with the actions that were really taken, and
+its predicted goal and human positions are compared with the recorded observations: the
+Euclidean error in metres, in the robot frame. An episode counts at step ``k`` while it was
+still running (the step that produced the observation was a real one).
+
+Predictors: the three of :mod:`pipeline.worldmodel.ego` (``copy-last``, ``static``,
+``constant-velocity``; the robot's own motion exact in the last two) and the paper's VAE + LSTM
+(``vae-lstm``): the VAE encodes every real observation (its mean), the LSTM is teacher-forced
+along the real trajectory up to the present, then fed its own predicted latents; each latent is
+decoded by the VAE. Its ``k = 0`` error is the VAE's alone (decode(encode(obs))). The networks
+run in float64 copies, so the errors do not depend on the batch size.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.env.core import NUM_ACTIONS, Simulator
+from pipeline.env.params import EnvParams
+from pipeline.worldmodel.ego import PREDICTORS, positions, predict_positions
+
+MODEL_PREDICTOR = "vae-lstm"
+"""The name of the paper's world model among the predictors."""
+
+Policy = Callable[[np.ndarray], np.ndarray]
+"""``policy(obs (N, D)) → actions (N,)``, called once per step for every episode."""
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Episodes recorded step by step (finished ones carried along, their actions ignored).
+
+    Attributes:
+        obs: (T + 1, N, D) float64 observations, ``obs[t]`` after ``t`` steps.
+        actions: (T, N) int64, ``actions[t]`` taken at step ``t``.
+        stepped: (T, N) bool, step ``t`` was a real step of a running episode.
+    """
+
+    obs: np.ndarray
+    actions: np.ndarray
+    stepped: np.ndarray
+
+
+def record(
+    env_params: EnvParams, policy: Policy, seed: int, scenario_ids: np.ndarray, steps: int
+) -> Recording:
+    """Run scenarios ``scenario_ids`` of ``seed`` for ``steps`` steps under ``policy``."""
+    ids = np.asarray(scenario_ids, dtype=np.int64)
+    sim = Simulator(len(ids), env_params)
+    obs, _ = sim.reset(seed=seed, scenario_ids=ids)
+    all_obs, actions, stepped = [np.asarray(obs, dtype=np.float64)], [], []
+    for _ in range(steps):
+        running = ~sim.state.done.copy()
+        a = np.asarray(policy(obs), dtype=np.int64)
+        obs = sim.step(a).obs
+        all_obs.append(np.asarray(obs, dtype=np.float64))
+        actions.append(a)
+        stepped.append(running)
+    return Recording(np.stack(all_obs), np.stack(actions), np.stack(stepped))
+
+
+def random_policy(seed: int) -> Policy:
+    """Uniform random actions from a generator of its own."""
+    rng = np.random.default_rng(seed)
+    return lambda obs: rng.integers(0, NUM_ACTIONS, size=len(obs))
+
+
+def epsilon_greedy(agent: Any, epsilon: float, seed: int) -> Policy:
+    """A trained agent's greedy action, replaced by a uniform one with probability ``epsilon``.
+    The agent's world-model state follows the actions really taken."""
+    rng = np.random.default_rng(seed)
+    features_of = agent.fresh_variant()
+    last: list[np.ndarray] = []
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        features = features_of.reset(obs) if not last else features_of.step(obs, last[0])[0]
+        greedy = agent.act(features).cpu().numpy()
+        explore = rng.random(len(obs)) < epsilon
+        actions = np.where(explore, rng.integers(0, NUM_ACTIONS, size=len(obs)), greedy)
+        last[:] = [actions]
+        return actions
+
+    return act
+
+
+def model_positions(
+    vae: Any, lstm: Any, recording: Recording, warmup: int, horizon: int, batch_size: int = 512
+) -> tuple[np.ndarray, np.ndarray]:
+    """The VAE + LSTM's positions: (N, 1 + H, 2) at ``k = 0`` (the VAE alone) and
+    (N, horizon, 1 + H, 2) open loop from step ``warmup`` (see the module docstring)."""
+    import torch
+
+    vae = copy.deepcopy(vae).double().eval()
+    lstm = copy.deepcopy(lstm).double().eval()
+    n = recording.obs.shape[1]
+    now = np.empty((n, *positions(recording.obs[0]).shape[1:]))
+    ahead = np.empty((n, horizon, *now.shape[1:]))
+    with torch.no_grad():
+        for start in range(0, n, batch_size):
+            rows = slice(start, start + batch_size)
+            obs = torch.from_numpy(recording.obs[: warmup + 1, rows])  # (warmup + 1, b, D)
+            actions = torch.from_numpy(recording.actions[:, rows])
+            z = vae.encode(obs.reshape(-1, obs.shape[-1]))[0].reshape(*obs.shape[:2], -1)
+
+            def decoded(latent: torch.Tensor) -> np.ndarray:
+                return positions(vae.destandardize(vae.decode(latent)).numpy())
+
+            now[rows] = decoded(z[warmup])
+            state = None
+            for t in range(warmup):  # teacher forcing along the real trajectory
+                _, state = lstm.step(z[t], actions[t], state)
+            latent = z[warmup]
+            for k in range(horizon):
+                latent, state = lstm.step(latent, actions[warmup + k], state)
+                ahead[rows, k] = decoded(latent)
+    return now, ahead
+
+
+def _mean_ci(errors: np.ndarray) -> tuple[float, float, float]:
+    """Mean and 95% t-interval of a sample (NaN interval below two values)."""
+    from scipy import stats
+
+    n = errors.size
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    mean = float(errors.mean())
+    if n < 2:
+        return mean, math.nan, math.nan
+    half = float(stats.t.ppf(0.975, n - 1) * errors.std(ddof=1) / math.sqrt(n))
+    return mean, mean - half, mean + half
+
+
+def _summaries(errors: np.ndarray, valid: np.ndarray) -> dict[str, list[Any]]:
+    """Per k: goal and humans (mean over humans) errors' means and intervals, over the valid
+    episodes; ``errors`` (N, K, 1 + H), ``valid`` (N, K)."""
+    out: dict[str, list[Any]] = {"goal": [], "goal_ci": [], "humans": [], "humans_ci": []}
+    for k in range(errors.shape[1]):
+        rows = valid[:, k]
+        for name, values in (
+            ("goal", errors[rows, k, 0]),
+            ("humans", errors[rows, k, 1:].mean(axis=-1)),
+        ):
+            mean, low, high = _mean_ci(values)
+            out[name].append(mean)
+            out[f"{name}_ci"].append([low, high])
+    return out
+
+
+def prediction_errors(
+    recording: Recording,
+    env_params: EnvParams,
+    *,
+    warmup: int,
+    horizon: int,
+    world_model: tuple[Any, Any] | None = None,
+    batch_size: int = 512,
+) -> dict[str, Any]:
+    """k-step errors (m) of every predictor on a recording.
+
+    Returns ``{"k": [1…horizon], "n": [episodes counted at each k], "predictors": {name:
+    {"goal", "goal_ci", "humans", "humans_ci"}}}``; the model's entry (with ``world_model =
+    (vae, lstm)``) also has ``"k0": {"goal", "humans"}``, the VAE's own error.
+    """
+    if warmup < 1:
+        raise ValueError(f"warmup: must be at least 1 (a velocity needs two views), got {warmup}")
+    if recording.actions.shape[0] < warmup + horizon:
+        raise ValueError(
+            f"the recording has {recording.actions.shape[0]} steps, "
+            f"warmup + horizon needs {warmup + horizon}"
+        )
+    t0 = warmup
+    truth = np.stack(
+        [positions(recording.obs[t0 + k]) for k in range(1, horizon + 1)], axis=1
+    )  # (N, K, 1 + H, 2)
+    # Observation t0 + k is real when every step t0 … t0 + k − 1 was (and t0 − 1, for the
+    # velocity): an episode that ended earlier is carried along frozen.
+    valid = np.logical_and.accumulate(recording.stepped[t0 - 1 : t0 + horizon], axis=0)[1:].T
+    future = recording.actions[t0 : t0 + horizon].T
+    predicted: dict[str, np.ndarray] = {
+        name: predict_positions(
+            name,
+            recording.obs[t0 - 1],
+            recording.obs[t0],
+            recording.actions[t0 - 1],
+            future,
+            env_params,
+        )
+        for name in PREDICTORS
+    }
+    now = None
+    if world_model is not None:
+        now, predicted[MODEL_PREDICTOR] = model_positions(
+            *world_model, recording, warmup, horizon, batch_size
+        )
+    result: dict[str, Any] = {
+        "k": list(range(1, horizon + 1)),
+        "n": valid.sum(axis=0).tolist(),
+        "predictors": {},
+    }
+    for name, prediction in predicted.items():
+        errors = np.linalg.norm(prediction - truth, axis=-1)  # (N, K, 1 + H)
+        result["predictors"][name] = _summaries(errors, valid)
+    if now is not None:
+        present = valid[:, 0]
+        error_now = np.linalg.norm(now - positions(recording.obs[t0]), axis=-1)[present]
+        result["predictors"][MODEL_PREDICTOR]["k0"] = {
+            "goal": float(error_now[:, 0].mean()),
+            "humans": float(error_now[:, 1:].mean()),
+        }
+    return result
+
+
+def error_table(errors: Mapping[str, Any], ks: Sequence[int] = (1, 4, 8, 12, 16)) -> list[dict]:
+    """Rows ``{"k", "<predictor> goal", "<predictor> humans", …}`` at the chosen ``k``."""
+    rows = []
+    for k in ks:
+        if k not in errors["k"]:
+            continue
+        i = errors["k"].index(k)
+        row: dict[str, Any] = {"k": k, "n": errors["n"][i]}
+        for name, values in errors["predictors"].items():
+            row[f"{name} goal"] = values["goal"][i]
+            row[f"{name} humans"] = values["humans"][i]
+        rows.append(row)
+    return rows

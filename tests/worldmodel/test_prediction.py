@@ -1,0 +1,64 @@
+"""k-step prediction errors in metres (pipeline/worldmodel/prediction.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from pipeline.env.params import EnvParams
+from pipeline.worldmodel.ego import PREDICTORS
+from pipeline.worldmodel.lstm import LatentLSTM
+from pipeline.worldmodel.prediction import (
+    MODEL_PREDICTOR,
+    prediction_errors,
+    random_policy,
+    record,
+)
+from pipeline.worldmodel.vae import VAE
+
+ENV = EnvParams()
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return record(ENV, random_policy(0), seed=11, scenario_ids=np.arange(24), steps=9)
+
+
+@pytest.fixture(scope="module")
+def world_model():
+    torch.manual_seed(0)
+    return VAE(23, 32, 4), LatentLSTM(4, 4, 16)
+
+
+def test_errors_do_not_depend_on_the_batch_size(recording, world_model) -> None:
+    one = prediction_errors(recording, ENV, warmup=3, horizon=6, world_model=world_model,
+                            batch_size=1)  # fmt: skip
+    many = prediction_errors(recording, ENV, warmup=3, horizon=6, world_model=world_model,
+                             batch_size=512)  # fmt: skip
+    for name in (*PREDICTORS, MODEL_PREDICTOR):
+        for key in ("goal", "humans"):
+            np.testing.assert_allclose(
+                one["predictors"][name][key], many["predictors"][name][key], rtol=0, atol=1e-12
+            )
+
+
+def test_goal_is_exact_with_ego_motion_and_counts_only_running_episodes(recording) -> None:
+    errors = prediction_errors(recording, ENV, warmup=3, horizon=6)
+    assert errors["k"] == [1, 2, 3, 4, 5, 6]
+    assert errors["n"] == sorted(errors["n"], reverse=True) and errors["n"][0] <= 24
+    for name in ("static", "constant-velocity"):
+        assert max(errors["predictors"][name]["goal"]) < 1e-5
+    # copy-last ignores the robot's motion: it is wrong as soon as the robot moves.
+    assert errors["predictors"]["copy-last"]["goal"][-1] > 0.1
+    cv, static = (errors["predictors"][n]["humans"] for n in ("constant-velocity", "static"))
+    assert all(c < s for c, s in zip(cv, static, strict=True))
+    low, high = errors["predictors"]["static"]["humans_ci"][0]
+    assert low <= static[0] <= high
+
+
+def test_bad_windows_are_refused(recording) -> None:
+    with pytest.raises(ValueError, match="warmup"):
+        prediction_errors(recording, ENV, warmup=0, horizon=3)
+    with pytest.raises(ValueError, match="warmup \\+ horizon"):
+        prediction_errors(recording, ENV, warmup=5, horizon=8)
