@@ -432,6 +432,84 @@ def report(
 
 @app.command()
 @friendly_errors
+def predict(
+    params_path: ParamsOption = Path("params.yaml"),
+    vae: Annotated[Path, typer.Option(help="The VAE file.")] = Path("models/vae.pt"),
+    lstm: Annotated[Path, typer.Option(help="The LSTM file.")] = Path("models/lstm.pt"),
+    agent: Annotated[
+        Path | None,
+        typer.Option(help="Agent file of the ε-greedy policy (default: dueling-dqn seed 0)."),
+    ] = Path("models/agents/dueling-dqn/seed-0.pt"),
+    episodes: Annotated[int, typer.Option(min=1, help="Scenarios per policy.")] = 300,
+    scenario_seed: Annotated[
+        int, typer.Option(min=0, help="Their seed (neither a training nor the test seed).")
+    ] = 2_000_003,
+    warmup: Annotated[int, typer.Option(min=1, help="Real steps before the rollout.")] = 5,
+    horizon: Annotated[int, typer.Option(min=1, help="Steps ahead: k = 1..horizon.")] = 16,
+    epsilon: Annotated[
+        float, typer.Option(min=0.0, max=1.0, help="Exploration of the agent's policy.")
+    ] = 0.2,
+    out: Annotated[Path, typer.Option(help="The errors (JSON).")] = Path("metrics/prediction.json"),
+    figure: Annotated[Path, typer.Option(help="Error against k (PNG).")] = Path(
+        "reports/prediction.png"
+    ),
+    no_tracking: NoTrackingOption = False,
+    threads: ThreadsOption = None,
+) -> None:
+    """k-step prediction errors in metres of the world model (VAE + LSTM) beside copy-last,
+    static humans and constant velocity (the robot's own motion exact), under the random policy
+    and a trained agent's ε-greedy one, open loop with the true actions."""
+    params = _load(params_path, None, None)
+    _set_threads(threads)
+    from pipeline.agents.agent_file import load_agent
+    from pipeline.evaluation.figures import prediction_figure
+    from pipeline.io import check_writable, write_json_atomic
+    from pipeline.tracking import stage_run
+    from pipeline.worldmodel.prediction import error_table, evaluate_prediction
+    from pipeline.worldmodel.training import load_lstm, load_vae
+
+    check_writable(out, figure)
+    settings = {
+        "episodes": episodes,
+        "scenario_seed": scenario_seed,
+        "warmup": warmup,
+        "horizon": horizon,
+        "epsilon": epsilon,
+        "agent": str(agent) if agent else None,
+    }
+    with stage_run("predict", {"prediction": settings}, enabled=not no_tracking) as run:
+        result = evaluate_prediction(
+            params.env,
+            world_model=(load_vae(vae), load_lstm(lstm)),
+            agent=load_agent(agent) if agent is not None else None,
+            episodes=episodes,
+            scenario_seed=scenario_seed,
+            warmup=warmup,
+            horizon=horizon,
+            epsilon=epsilon,
+        )
+        write_json_atomic(out, result)
+        prediction_figure(result, figure)
+        for policy, errors in result["policies"].items():
+            for name, values in errors["predictors"].items():
+                for k, goal, humans in zip(
+                    errors["k"], values["goal"], values["humans"], strict=True
+                ):
+                    run.log_metrics(
+                        {f"{policy}.{name}.goal_m": goal, f"{policy}.{name}.humans_m": humans},
+                        step=k,
+                    )
+        run.log_artifact(out)
+        run.log_artifact(figure)
+    for policy, errors in result["policies"].items():
+        table = error_table(errors)
+        formats = {c: ".3f" for c in table[0] if c not in ("k", "n")} if table else {}
+        _print_table(table, f"{policy} policy: mean error (m) k steps ahead", {"n": "d", **formats})
+    typer.echo(f"wrote {out} and {figure}")
+
+
+@app.command()
+@friendly_errors
 def check(
     rerun: Annotated[Path, typer.Argument(help="metrics/eval of a rerun (another clone).")],
     committed: Annotated[Path, typer.Option(help="The committed evaluation metrics.")] = Path(

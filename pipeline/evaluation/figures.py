@@ -255,6 +255,46 @@ def means_figure(
     _save(figure, path)
 
 
+PREDICTION_FLOOR_M = 1e-4
+"""Errors below this (the exact ego-motion of the goal) are drawn at it on the log axis."""
+
+
+PREDICTOR_COLORS: dict[str, str] = {
+    "copy-last": "#7f7f7f",
+    "static": "#2ca02c",
+    "constant-velocity": "#d62728",
+    "vae-lstm": "#1f77b4",
+}
+"""One colour per predictor in the prediction figure."""
+
+
+def prediction_figure(errors: Mapping[str, object], path: str | Path) -> None:
+    """k-step prediction error (m, log scale) against k: one row per policy, goal and humans
+    side by side, every predictor with its 95% interval (from
+    :func:`pipeline.worldmodel.prediction.evaluate_prediction`)."""
+    policies = errors["policies"]  # type: ignore[index]
+    figure = Figure(figsize=(10, 3.4 * len(policies)))
+    for row, (policy, result) in enumerate(policies.items()):  # type: ignore[union-attr]
+        for column, part in enumerate(("goal", "humans")):
+            axes = figure.add_subplot(len(policies), 2, 2 * row + column + 1)
+            for index, (name, values) in enumerate(result["predictors"].items()):
+                mean = np.maximum(np.asarray(values[part], dtype=float), PREDICTION_FLOOR_M)
+                band = np.maximum(np.asarray(values[f"{part}_ci"], dtype=float), PREDICTION_FLOOR_M)
+                color = PREDICTOR_COLORS.get(name, _color(name, index))
+                axes.plot(result["k"], mean, "o-", color=color, markersize=3, label=name)
+                axes.fill_between(result["k"], band[:, 0], band[:, 1], color=color, alpha=0.2)
+            axes.set_yscale("log")
+            axes.set_xlabel("steps ahead k (1 s each)")
+            axes.set_ylabel(f"{part} error (m)")
+            axes.set_title(f"{part}, {policy} policy", fontsize="medium")
+            axes.grid(alpha=0.3, which="both")
+            if row == 0 and column == 1:
+                axes.legend(fontsize="small")
+    figure.suptitle("Open-loop prediction error in the robot frame (mean and 95% interval)")
+    figure.subplots_adjust(hspace=0.45)
+    _save(figure, path)
+
+
 # --------------------------------------------------------------------------------------------
 # Animated scenarios
 # --------------------------------------------------------------------------------------------

@@ -234,3 +234,48 @@ def error_table(errors: Mapping[str, Any], ks: Sequence[int] = (1, 4, 8, 12, 16)
             row[f"{name} humans"] = values["humans"][i]
         rows.append(row)
     return rows
+
+
+def evaluate_prediction(
+    env_params: EnvParams,
+    *,
+    world_model: tuple[Any, Any],
+    agent: Any | None,
+    episodes: int,
+    scenario_seed: int,
+    warmup: int,
+    horizon: int,
+    epsilon: float,
+    batch_size: int = 512,
+) -> dict[str, Any]:
+    """The errors of every predictor under the random policy and, with ``agent``, under its
+    ε-greedy policy: ``{"settings": {…}, "policies": {"random": …, "agent": …}}``, each policy's
+    entry as :func:`prediction_errors` returns it. Both policies run scenarios
+    ``0..episodes−1`` of ``scenario_seed``."""
+    for name, value, low in (("episodes", episodes, 1), ("horizon", horizon, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+    if not 0.0 <= epsilon <= 1.0:
+        raise ValueError(f"epsilon: must be in [0, 1], got {epsilon!r}")
+    ids = np.arange(episodes)
+    policies: dict[str, Policy] = {"random": random_policy(scenario_seed)}
+    if agent is not None:
+        policies["agent"] = epsilon_greedy(agent, epsilon, scenario_seed)
+    result: dict[str, Any] = {
+        "settings": {
+            "episodes": episodes,
+            "scenario_seed": scenario_seed,
+            "warmup": warmup,
+            "horizon": horizon,
+            "epsilon": epsilon,
+            "agent": None if agent is None else agent.variant_name,
+        },
+        "policies": {},
+    }
+    for name, policy in policies.items():
+        recording = record(env_params, policy, scenario_seed, ids, warmup + horizon)
+        result["policies"][name] = prediction_errors(
+            recording, env_params, warmup=warmup, horizon=horizon, world_model=world_model,
+            batch_size=batch_size,
+        )  # fmt: skip
+    return result

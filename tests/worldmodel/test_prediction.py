@@ -62,3 +62,23 @@ def test_bad_windows_are_refused(recording) -> None:
         prediction_errors(recording, ENV, warmup=0, horizon=3)
     with pytest.raises(ValueError, match="warmup \\+ horizon"):
         prediction_errors(recording, ENV, warmup=5, horizon=8)
+
+
+def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_model) -> None:
+    from pipeline.evaluation.figures import prediction_figure
+    from pipeline.worldmodel.prediction import evaluate_prediction
+
+    result = evaluate_prediction(
+        ENV, world_model=world_model, agent=None, episodes=5, scenario_seed=3, warmup=2,
+        horizon=3, epsilon=0.1,
+    )  # fmt: skip
+    assert list(result["policies"]) == ["random"]
+    assert result["settings"]["horizon"] == 3
+    errors = result["policies"]["random"]["predictors"]
+    assert set(errors) == {*PREDICTORS, MODEL_PREDICTOR}
+    assert set(errors[MODEL_PREDICTOR]["k0"]) == {"goal", "humans"}
+    prediction_figure(result, tmp_path / "prediction.png")
+    assert (tmp_path / "prediction.png").stat().st_size > 1000
+    with pytest.raises(ValueError, match="epsilon"):
+        evaluate_prediction(ENV, world_model=world_model, agent=None, episodes=5,
+                            scenario_seed=3, warmup=2, horizon=3, epsilon=1.5)  # fmt: skip
