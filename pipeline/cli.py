@@ -461,46 +461,23 @@ def predict(
     and a trained agent's ε-greedy one, open loop with the true actions."""
     params = _load(params_path, None, None)
     _set_threads(threads)
-    from pipeline.agents.agent_file import load_agent
-    from pipeline.evaluation.figures import prediction_figure
-    from pipeline.io import check_writable, write_json_atomic
-    from pipeline.tracking import stage_run
-    from pipeline.worldmodel.prediction import error_table, evaluate_prediction
-    from pipeline.worldmodel.training import load_lstm, load_vae
+    from pipeline.stages import predict as stage
+    from pipeline.worldmodel.prediction import error_table
 
-    check_writable(out, figure)
-    settings = {
-        "episodes": episodes,
-        "scenario_seed": scenario_seed,
-        "warmup": warmup,
-        "horizon": horizon,
-        "epsilon": epsilon,
-        "agent": str(agent) if agent else None,
-    }
-    with stage_run("predict", {"prediction": settings}, enabled=not no_tracking) as run:
-        result = evaluate_prediction(
-            params.env,
-            world_model=(load_vae(vae), load_lstm(lstm)),
-            agent=load_agent(agent) if agent is not None else None,
-            episodes=episodes,
-            scenario_seed=scenario_seed,
-            warmup=warmup,
-            horizon=horizon,
-            epsilon=epsilon,
-        )
-        write_json_atomic(out, result)
-        prediction_figure(result, figure)
-        for policy, errors in result["policies"].items():
-            for name, values in errors["predictors"].items():
-                for k, goal, humans in zip(
-                    errors["k"], values["goal"], values["humans"], strict=True
-                ):
-                    run.log_metrics(
-                        {f"{policy}.{name}.goal_m": goal, f"{policy}.{name}.humans_m": humans},
-                        step=k,
-                    )
-        run.log_artifact(out)
-        run.log_artifact(figure)
+    result = stage.run(
+        params,
+        vae=vae,
+        lstm=lstm,
+        agent=agent,
+        episodes=episodes,
+        scenario_seed=scenario_seed,
+        warmup=warmup,
+        horizon=horizon,
+        epsilon=epsilon,
+        out=out,
+        figure=figure,
+        tracking=not no_tracking,
+    )
     for policy, errors in result["policies"].items():
         table = error_table(errors)
         formats = {c: ".3f" for c in table[0] if c not in ("k", "n")} if table else {}

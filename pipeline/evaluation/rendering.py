@@ -179,8 +179,10 @@ def render_summary(
     num_scenarios: int,
     smoothing_window: int,
     alpha: float,
+    prediction: Mapping[str, Any] | None = None,
 ) -> str:
-    """The text of ``summary.md``: tables, comparisons, Pareto set, the paper, claims, figures."""
+    """The text of ``summary.md``: tables, comparisons, Pareto set, the paper, claims, the world
+    model's prediction errors (``prediction``, from ``socnav-wm predict``), figures."""
     lines: list[str] = ["# socnav-wm: evaluation report", ""]
     present = list(evaluations)
     seeds_text = ", ".join(
@@ -341,6 +343,8 @@ def render_summary(
                 f"{check.metric}: {check.evidence}"
             )
     lines += ["", f"> {paper.BASELINE_NOTE}", ""]
+    if prediction is not None:
+        lines += prediction_section(prediction)
 
     # -- figures -------------------------------------------------------------------------------
     lines += ["## Figures", ""]
@@ -448,6 +452,65 @@ RESULTS_METRICS = (
     "personal_space_compliance",
 )
 """The columns of the short results table (README); ``summary.md`` has every metric."""
+
+
+PREDICTION_KS = (1, 4, 8, 12, 16)
+"""The steps ahead shown in the report's prediction table."""
+
+
+def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
+    """The world model's k-step errors in metres beside the no-learning predictors (the
+    content of ``metrics/prediction.json``), one table per policy."""
+    settings = prediction["settings"]
+    lines = [
+        "## The world model's predictions, in metres",
+        "",
+        f"Open-loop rollouts of the true actions from real states, after {settings['warmup']} "
+        f"real steps, on {settings['episodes']} scenarios of seed {settings['scenario_seed']}; "
+        "mean Euclidean error in the robot frame, over the episodes still running at k "
+        "(`socnav-wm predict`, `metrics/prediction.json`, figure `prediction.png`). The paper "
+        "never measured its world model this way. `static` and `constant-velocity` apply the "
+        "robot's own motion exactly (their goal error is 0).",
+        "",
+    ]
+    for policy, errors in prediction["policies"].items():
+        names = list(errors["predictors"])
+        model = "vae-lstm" if "vae-lstm" in names else None
+        header = ["k", "n", *(f"{n}: humans" for n in names)]
+        if model:
+            header.append(f"{model}: goal")
+        rows = []
+        if model and "k0" in errors["predictors"][model]:
+            k0 = errors["predictors"][model]["k0"]
+            rows.append(["0 (VAE alone)", "", *("" for _ in names[:-1]),
+                         f"{k0['humans']:.3f}", f"{k0['goal']:.3f}"])  # fmt: skip
+        for k in PREDICTION_KS:
+            if k not in errors["k"]:
+                continue
+            i = errors["k"].index(k)
+            row = [str(k), str(errors["n"][i])]
+            row += [f"{errors['predictors'][n]['humans'][i]:.3f}" for n in names]
+            if model:
+                row.append(f"{errors['predictors'][model]['goal'][i]:.3f}")
+            rows.append(row)
+        agent = f" ({settings['agent']}, ε = {settings['epsilon']})" if policy == "agent" else ""
+        lines += [f"**{policy} policy{agent}**", ""] + _table(header, rows) + [""]
+        if model and "constant-velocity" in names:
+            ours = errors["predictors"][model]["humans"]
+            cv = errors["predictors"]["constant-velocity"]["humans"]
+            static = errors["predictors"]["static"]["humans"]
+            below_cv = [k for k, a, b in zip(errors["k"], ours, cv, strict=True) if a < b]
+            below_static = [k for k, a, b in zip(errors["k"], ours, static, strict=True) if a < b]
+            lines += [
+                f"- {model} predicts the humans better than constant velocity at "
+                f"{_ks(below_cv)}, better than static humans at {_ks(below_static)}.",
+                "",
+            ]
+    return lines
+
+
+def _ks(ks: Sequence[int]) -> str:
+    return "no k" if not ks else "k = " + ", ".join(map(str, ks))
 
 
 def results_table(

@@ -26,6 +26,7 @@ Statistics (see :mod:`pipeline.evaluation.stats` for the building blocks)
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -314,6 +315,19 @@ def _gif_episodes(
     return per_scenario, notes
 
 
+def _read_prediction(path: str | Path | None) -> dict[str, Any] | None:
+    """The content of ``metrics/prediction.json`` (None without a path); one line when it is
+    not a prediction file."""
+    if path is None:
+        return None
+    try:
+        content = json.loads(Path(path).read_text(encoding="utf-8"))
+        content["settings"], content["policies"]  # noqa: B018 - the two keys the report reads
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a socnav-wm prediction file ({exc})") from None
+    return content
+
+
 def build_report(
     eval_dir: str | Path,
     training_dir: str | Path,
@@ -332,6 +346,7 @@ def build_report(
     gif_size: int = 200,
     gif_max_frames: int = 60,
     documents: Sequence[str | Path] = (),
+    prediction_path: str | Path | None = None,
 ) -> ReportResult:
     """Write the report of every evaluated method (see the module docstring).
 
@@ -354,6 +369,8 @@ def build_report(
         gif_max_frames: frames per scenario in the GIF (long episodes are subsampled).
         documents: markdown files (the README) whose ``results`` block
             (:func:`~pipeline.evaluation.rendering.replace_marked_block`) gets the results table.
+        prediction_path: the world model's prediction errors (``metrics/prediction.json`` of
+            ``socnav-wm predict``), reported when given.
 
     Returns:
         A :class:`ReportResult`.
@@ -466,6 +483,7 @@ def build_report(
         num_scenarios=num_scenarios,
         smoothing_window=smoothing_window,
         alpha=alpha,
+        prediction=_read_prediction(prediction_path),
     )
     summary_path = out_dir / "summary.md"
     pareto_path = out_dir / "pareto.json"

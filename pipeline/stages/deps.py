@@ -27,6 +27,7 @@ STAGE_MODULES: dict[str, str] = {
     "evaluate": "pipeline.stages.evaluate",
     "evaluate_baseline": "pipeline.stages.evaluate",
     "evaluate_planner": "pipeline.stages.evaluate",
+    "predict": "pipeline.stages.predict",
     "report": "pipeline.stages.report",
 }
 """``dvc.yaml`` stage name → the module its command runs."""

@@ -17,6 +17,7 @@ def run(
     out_dir: Path = Path("reports"),
     metrics: Path = Path("metrics/report.json"),
     documents: tuple[Path, ...] | None = None,
+    prediction: Path | None = Path("metrics/prediction.json"),
     tracking: bool = True,
 ) -> str:
     r = params.report
@@ -37,6 +38,7 @@ def run(
             solved_success_rate=params.agent.solved_success_rate,
             alpha=r.alpha,
             documents=documents,
+            prediction_path=prediction if prediction is not None and prediction.is_file() else None,
         )
         for claim, verdict in result.verdicts.items():
             run.set_tag(f"claim.{claim}", verdict)

@@ -66,6 +66,7 @@ def test_bad_windows_are_refused(recording) -> None:
 
 def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_model) -> None:
     from pipeline.evaluation.figures import prediction_figure
+    from pipeline.evaluation.rendering import prediction_section
     from pipeline.worldmodel.prediction import evaluate_prediction
 
     result = evaluate_prediction(
@@ -79,6 +80,9 @@ def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_
     assert set(errors[MODEL_PREDICTOR]["k0"]) == {"goal", "humans"}
     prediction_figure(result, tmp_path / "prediction.png")
     assert (tmp_path / "prediction.png").stat().st_size > 1000
+    section = "\n".join(prediction_section(result))
+    assert "| 0 (VAE alone) |" in section and "vae-lstm: goal" in section
+    assert "vae-lstm predicts the humans better than constant velocity at" in section
     with pytest.raises(ValueError, match="epsilon"):
         evaluate_prediction(ENV, world_model=world_model, agent=None, episodes=5,
                             scenario_seed=3, warmup=2, horizon=3, epsilon=1.5)  # fmt: skip

@@ -1,0 +1,72 @@
+"""Stage ``predict``: the world model's k-step prediction errors in metres
+(:mod:`pipeline.worldmodel.prediction`), under the random policy and a trained agent's ε-greedy
+one, to ``metrics/prediction.json``, MLflow and a figure of error against k."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pipeline.agents.agent_file import load_agent
+from pipeline.config import Params
+from pipeline.evaluation.figures import prediction_figure
+from pipeline.io import check_writable, outputs_together, write_json_atomic
+from pipeline.tracking import stage_run
+from pipeline.worldmodel.prediction import evaluate_prediction
+from pipeline.worldmodel.training import load_lstm, load_vae
+
+
+def run(
+    params: Params,
+    *,
+    vae: Path,
+    lstm: Path,
+    agent: Path | None,
+    episodes: int,
+    scenario_seed: int,
+    warmup: int,
+    horizon: int,
+    epsilon: float,
+    out: Path,
+    figure: Path,
+    tracking: bool = True,
+) -> dict[str, Any]:
+    """Measure, write ``out`` and ``figure`` together, log to MLflow; returns the errors."""
+    check_writable(out, figure)
+    settings = {
+        "env": params.env.to_dict(),
+        "prediction": {
+            "episodes": episodes,
+            "scenario_seed": scenario_seed,
+            "warmup": warmup,
+            "horizon": horizon,
+            "epsilon": epsilon,
+            "agent": str(agent) if agent else None,
+        },
+    }
+    with stage_run("predict", settings, enabled=tracking) as mlflow_run:
+        result = evaluate_prediction(
+            params.env,
+            world_model=(load_vae(vae), load_lstm(lstm)),
+            agent=load_agent(agent) if agent is not None else None,
+            episodes=episodes,
+            scenario_seed=scenario_seed,
+            warmup=warmup,
+            horizon=horizon,
+            epsilon=epsilon,
+        )
+        with outputs_together(out, figure) as (out_tmp, figure_tmp):
+            write_json_atomic(out_tmp, result)
+            prediction_figure(result, figure_tmp)
+        for policy, errors in result["policies"].items():
+            for name, values in errors["predictors"].items():
+                for k, goal, humans in zip(
+                    errors["k"], values["goal"], values["humans"], strict=True
+                ):
+                    mlflow_run.log_metrics(
+                        {f"{policy}.{name}.goal_m": goal, f"{policy}.{name}.humans_m": humans},
+                        step=k,
+                    )
+        mlflow_run.log_artifact(out)
+        mlflow_run.log_artifact(figure)
+    return result
