@@ -306,28 +306,34 @@ def _child_cpu_seconds(command: list[str], cwd: str, env: dict[str, str]) -> tup
     return usage.ru_utime + usage.ru_stime, time.perf_counter() - start
 
 
-def bench_contention(threads: tuple[int, ...], hogs: int, repeats: int = 1) -> list[dict[str, Any]]:
+def bench_contention(
+    threads: tuple[int, ...],
+    hogs: int,
+    repeats: int = 1,
+    settings: tuple[str, ...] = CONTENTION_STAGE_SETTINGS,
+) -> list[dict[str, Any]]:
     """CPU-seconds of the ``train-vae`` stage alone and beside ``hogs`` busy processes
     (``yes > /dev/null``), for each torch thread count.
 
     A stage whose threads spin while waiting for a core (OpenMP's busy wait) burns CPU-seconds
     the work does not need when the cores are shared; the ratio says by how much. The stage
     runs as its own process (``socnav-wm train-vae --no-tracking``) in a temporary folder, on
-    data that ``socnav-wm collect`` writes there first. Each row is the fastest of ``repeats``.
+    data that ``socnav-wm collect`` writes there first, both with ``settings`` (``--set``
+    overrides of the defaults). Each row is the fastest of ``repeats``.
     """
     import subprocess
     import sys
     import tempfile
 
     cli = [sys.executable, "-m", "pipeline.cli"]
-    settings = [f"--set={s}" for s in CONTENTION_STAGE_SETTINGS]
+    options = [f"--set={s}" for s in settings]
     env = {k: v for k, v in os.environ.items() if k != "OMP_NUM_THREADS"}
     rows = []
     with tempfile.TemporaryDirectory(prefix="socnav-wm-contention-") as work:
         open(os.path.join(work, "params.yaml"), "w").close()  # every default
-        _child_cpu_seconds([*cli, "collect", "--no-tracking", "--quiet", *settings], work, env)
+        _child_cpu_seconds([*cli, "collect", "--no-tracking", "--quiet", *options], work, env)
         for n in threads:
-            stage = [*cli, "train-vae", "--no-tracking", "--quiet", f"--threads={n}", *settings]
+            stage = [*cli, "train-vae", "--no-tracking", "--quiet", f"--threads={n}", *options]
             alone = min(_child_cpu_seconds(stage, work, env) for _ in range(repeats))
             busy = [subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) for _ in range(hogs)]
             try:

@@ -16,3 +16,14 @@ def test_bench_train_reports_both_rates() -> None:
         16,
     )  # z and 4 predictions, decoded
     assert row["env_steps_per_cpu_s"] > 0 and row["updates_per_cpu_s"] > 0
+
+
+def test_bench_contention_measures_the_stage_alone_and_beside_busy_processes() -> None:
+    from pipeline.bench import bench_contention
+
+    tiny = ("collect.episodes=16", "collect.num_envs=8", "vae.max_epochs=1", "vae.hidden_dim=16",
+            "vae.device=cpu")  # fmt: skip
+    (row,) = bench_contention((1,), hogs=1, settings=tiny)
+    assert row["stage"] == "train-vae" and row["threads"] == 1 and row["hogs"] == 1
+    assert row["cpu_s_alone"] > 0 and row["cpu_s_shared"] > 0
+    assert row["ratio"] == row["cpu_s_shared"] / row["cpu_s_alone"]

@@ -457,6 +457,14 @@ RESULTS_METRICS = (
 PREDICTION_KS = (1, 4, 8, 12, 16)
 """The steps ahead shown in the report's prediction table."""
 
+PREDICTOR_ORDER = ("copy-last", "static", "constant-velocity", "vae-lstm")
+POLICY_ORDER = ("random", "agent")
+"""Columns and tables of the prediction section (the JSON file's keys are sorted)."""
+
+
+def _ordered(names: Sequence[str], order: Sequence[str]) -> list[str]:
+    return [n for n in order if n in names] + sorted(n for n in names if n not in order)
+
 
 def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
     """The world model's k-step errors in metres beside the no-learning predictors (the
@@ -473,8 +481,9 @@ def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
         "robot's own motion exactly (their goal error is 0).",
         "",
     ]
-    for policy, errors in prediction["policies"].items():
-        names = list(errors["predictors"])
+    for policy in _ordered(list(prediction["policies"]), POLICY_ORDER):
+        errors = prediction["policies"][policy]
+        names = _ordered(list(errors["predictors"]), PREDICTOR_ORDER)
         model = "vae-lstm" if "vae-lstm" in names else None
         header = ["k", "n", *(f"{n}: humans" for n in names)]
         if model:
@@ -482,8 +491,10 @@ def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
         rows = []
         if model and "k0" in errors["predictors"][model]:
             k0 = errors["predictors"][model]["k0"]
-            rows.append(["0 (VAE alone)", "", *("" for _ in names[:-1]),
-                         f"{k0['humans']:.3f}", f"{k0['goal']:.3f}"])  # fmt: skip
+            row = ["0 (VAE alone)", ""] + [
+                f"{k0['humans']:.3f}" if n == model else "" for n in names
+            ]
+            rows.append([*row, f"{k0['goal']:.3f}"])
         for k in PREDICTION_KS:
             if k not in errors["k"]:
                 continue
