@@ -125,7 +125,8 @@ def check_claims(
         alpha: family-wise error rate of each claim's tests (Holm within the claim).
     """
     # The paper's claims are about its seven methods: others (the planners) do not enter its
-    # Pareto fronts and ranks.
+    # comparisons, Pareto fronts and ranks.
+    evaluations = {m: e for m, e in evaluations.items() if m in PAPER_METHODS}
     means = {m: v for m, v in means.items() if m in PAPER_METHODS}
     results: list[ClaimResult] = []
     tested: list[ClaimCheck] = []  # the current claim's checks with a p-value: its Holm family

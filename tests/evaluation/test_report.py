@@ -436,6 +436,25 @@ def test_claim_verdicts_follow_the_data():
     assert check.status == "inconclusive" and "p = " in check.evidence
 
 
+def test_the_papers_claims_leave_the_planners_out():
+    rows = 80
+    half = (np.arange(rows) % 40 < 20).astype(float)
+    evaluations, means = _claim_inputs(
+        np.ones(rows), half, np.full(rows, 0.9), np.full(rows, 0.1), np.zeros(rows), np.zeros(rows)
+    )
+    before = _verdicts(evaluations, means)
+    # A planner that beats everyone would contradict "2StepAhead-MASPM is best", were it counted.
+    planner = _evaluation(
+        _episodes("cv-mpc", (BASELINE_SEED,), 40, success=np.ones(40), reward=np.full(40, 2.0),
+                  human_collision=np.zeros(40))
+    )  # fmt: skip
+    evaluations["cv-mpc"] = planner
+    means["cv-mpc"] = {k: float(np.nanmean(planner.episodes[k].to_numpy())) for k in ALL_METRICS}
+    assert _verdicts(evaluations, means) == before
+    for result in check_claims(evaluations, means, {}):
+        assert all("cv-mpc" not in (c.subject, c.other) for c in result.checks)
+
+
 def _training(levels: dict[str, list[float]]) -> dict:
     """A training_summary-like dict with the given per-seed plateaus (solved never)."""
     return {
