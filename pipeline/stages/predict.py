@@ -8,12 +8,17 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.agents.agent_file import load_agent
-from pipeline.config import Params
+from pipeline.config import Params, params_dict, select_sections
 from pipeline.evaluation.figures import prediction_figure
 from pipeline.io import check_writable, outputs_together, write_json_atomic
 from pipeline.tracking import stage_run
 from pipeline.worldmodel.prediction import evaluate_prediction
 from pipeline.worldmodel.training import load_lstm, load_vae
+
+SECTIONS: tuple[str, ...] = ("env",)
+"""The parts of params.yaml the stage reads (dvc.yaml's ``params:``); its own settings are the
+command's options, written out in dvc.yaml's ``cmd``. (The other stages' lists are
+:data:`pipeline.config.STAGE_SECTIONS`.)"""
 
 
 def run(
@@ -34,7 +39,7 @@ def run(
     """Measure, write ``out`` and ``figure`` together, log to MLflow; returns the errors."""
     check_writable(out, figure)
     settings = {
-        "env": params.env.to_dict(),
+        **select_sections(params_dict(params), SECTIONS),
         "prediction": {
             "episodes": episodes,
             "scenario_seed": scenario_seed,
