@@ -283,12 +283,12 @@ def bench_train(
 
 
 CONTENTION_STAGE_SETTINGS: tuple[str, ...] = (
-    "collect.episodes=300",
+    "collect.episodes=1000",
     "vae.max_epochs=3",
     "vae.patience=3",
     "vae.device=cpu",
 )
-"""The ``train-vae`` run of :func:`bench_contention`: the shipped VAE, three epochs over 300
+"""The ``train-vae`` run of :func:`bench_contention`: the shipped VAE, three epochs over 1000
 random episodes (a few CPU-seconds)."""
 
 
@@ -346,6 +346,8 @@ def bench_contention(
                 {
                     "stage": "train-vae",
                     "threads": n,
+                    "omp_wait_policy": env.get("OMP_WAIT_POLICY", "(default)"),
+                    "gomp_spincount": env.get("GOMP_SPINCOUNT", "(default)"),
                     "hogs": hogs,
                     "cpu_s_alone": alone[0],
                     "cpu_s_shared": shared[0],

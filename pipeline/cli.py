@@ -9,12 +9,22 @@ unreachable tracking server) end with one line on stderr and exit code 2, never 
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+
+# OpenMP threads that wait for work spin a little (10,000 iterations), then sleep. libgomp reads
+# this when torch loads it, so it is set before any import of torch. Threads that spin for
+# long burn the CPU a neighbour on a shared machine needs, and wait for it in turn: train-vae on
+# two threads beside two busy processes took 2.3x its CPU-seconds alone with OMP_WAIT_POLICY=
+# ACTIVE, 0.9x with PASSIVE (which sleeps at once, but ran 40% longer alone) and 1.1x with
+# this (`socnav-wm bench contention`). Results do not depend on it. Set either to override.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 
 app = typer.Typer(
     name="socnav-wm",
@@ -131,7 +141,6 @@ ThreadsOption = Annotated[
 
 def available_cores() -> int:
     """The CPU cores this process may run on (its affinity mask where the OS has one)."""
-    import os
 
     if hasattr(os, "sched_getaffinity"):
         return max(1, len(os.sched_getaffinity(0)))
@@ -143,7 +152,6 @@ def _set_threads(threads: int | None) -> int:
     else every available core, capped at the available cores (more threads than cores spin
     against each other and against the neighbours on a shared machine). Returns the count.
     Results do not depend on it (tests/agents/test_training.py)."""
-    import os
 
     cores = available_cores()
     if threads is None:

@@ -128,3 +128,20 @@ def test_a_bad_setting_is_reported_before_torch_or_mlflow_is_imported(tmp_path: 
     )  # fmt: skip
     assert result.stdout.strip() == "2 []", result.stdout + result.stderr
     assert "agent.gamma" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_the_cli_limits_openmp_spinning_unless_told_otherwise() -> None:
+    import os
+    import subprocess
+    import sys
+
+    show = (
+        "import os, pipeline.cli; "
+        "print(os.environ['OMP_WAIT_POLICY'], os.environ['GOMP_SPINCOUNT'])"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT")}
+    out = subprocess.run([sys.executable, "-c", show], env=env, capture_output=True, text=True)
+    assert out.stdout.split() == ["PASSIVE", "10000"]
+    env["OMP_WAIT_POLICY"] = "ACTIVE"
+    out = subprocess.run([sys.executable, "-c", show], env=env, capture_output=True, text=True)
+    assert out.stdout.split()[0] == "ACTIVE"
