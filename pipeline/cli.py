@@ -567,7 +567,7 @@ def render(
     policy: Annotated[
         str,
         typer.Option(
-            help="Robot policy: random, orca, sfm, a variant (its seed-0 agent in "
+            help="Robot policy: random, orca, sfm, cv-mpc, a variant (its seed-0 agent in "
             "--agents-dir) or the path of an agent file."
         ),
     ] = "random",
@@ -586,13 +586,14 @@ def render(
     fps: Annotated[float, typer.Option(min=0.5, help="Frames per second.")] = 8.0,
     size: Annotated[int, typer.Option(min=64, help="Frame side in pixels.")] = 480,
 ) -> None:
-    """Render episodes of any robot policy (random, a baseline, a trained agent) in the
-    simulator as an animated GIF, on chosen scenarios."""
-    from pipeline.agents.params import BASELINE_NAMES, VARIANT_NAMES
+    """Render episodes of any robot policy (random, a baseline, a planner, a trained agent) in
+    the simulator as an animated GIF, on chosen scenarios."""
+    from pipeline.agents.params import BASELINE_NAMES, PLANNER_NAMES, VARIANT_NAMES
 
     as_file = Path(policy)
-    if policy not in ("random", *BASELINE_NAMES, *VARIANT_NAMES) and as_file.suffix != ".pt":
-        choices = ", ".join(("random", *BASELINE_NAMES, *VARIANT_NAMES))
+    named = ("random", *BASELINE_NAMES, *PLANNER_NAMES, *VARIANT_NAMES)
+    if policy not in named and as_file.suffix != ".pt":
+        choices = ", ".join(named)
         raise UserError(f"--policy: unknown {policy!r}; expected {choices} or an agent file (.pt)")
     import numpy as np
 
@@ -612,6 +613,12 @@ def render(
         baseline = make_baseline(policy, **overrides)
         act = lambda sim: baseline.act(sim.state, sim.params)  # noqa: E731
         runs = run_episodes(params, act, seed, ids, reads_simulator=True)
+    elif policy in PLANNER_NAMES:
+        from pipeline.planning.models import ConstantVelocityModel
+        from pipeline.planning.mpc import Planner
+
+        planner = Planner(ConstantVelocityModel(params), config.planning, params)
+        runs = run_episodes(params, planner.policy(), seed, ids)
     else:
         from pipeline.agents.agent_file import greedy_episodes, load_agent
 

@@ -40,9 +40,9 @@ def test_render_rejects_an_unknown_policy_in_one_line(tmp_path: Path) -> None:
     assert not (tmp_path / "x.gif").exists()
 
 
-@pytest.mark.parametrize("policy", ["orca", "agent-file"])
+@pytest.mark.parametrize("policy", ["orca", "cv-mpc", "agent-file"])
 def test_render_any_method_on_chosen_scenarios(tmp_path: Path, policy: str) -> None:
-    """A baseline or a trained agent's file, on the scenarios asked for."""
+    """A baseline, a planner or a trained agent's file, on the scenarios asked for."""
     from pipeline.env import EnvParams
     from tests.evaluation.conftest import save_tiny_agent
 
