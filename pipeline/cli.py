@@ -493,6 +493,62 @@ def predict(
     typer.echo(f"wrote {out} and {figure}")
 
 
+@app.command("train-planning-model")
+@friendly_errors
+def train_planning_model(
+    params_path: ParamsOption = Path("params.yaml"),
+    rollouts: Annotated[Path, typer.Option(help="The rollouts (collect's output).")] = Path(
+        "data/rollouts"
+    ),
+    out: Annotated[Path, typer.Option(help="The model file.")] = Path(
+        "models/planning/residual-cv.pt"
+    ),
+    seed: Annotated[int, typer.Option(min=0, help="Initialisation, shuffles, split.")] = 0,
+    horizon: Annotated[int, typer.Option(min=1, help="Open-loop steps in the loss.")] = 16,
+    stride: Annotated[int, typer.Option(min=1, help="Steps between training samples.")] = 4,
+    hidden_dim: Annotated[int, typer.Option(min=1, help="Width of the MLP.")] = 64,
+    learning_rate: Annotated[float, typer.Option(min=0.0, help="Adam's step.")] = 1e-4,
+    batch_size: Annotated[int, typer.Option(min=1, help="Samples per update.")] = 256,
+    max_epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 10,
+    patience: Annotated[int, typer.Option(min=1, help="Epochs without progress.")] = 3,
+    val_fraction: Annotated[float, typer.Option(min=0.0, max=0.99, help="Held out.")] = 0.05,
+    episodes: Annotated[int, typer.Option(min=1, help="Scenarios of the comparison.")] = 300,
+    scenario_seed: Annotated[int, typer.Option(min=0, help="Their seed.")] = 2_000_003,
+    threads: ThreadsOption = None,
+) -> None:
+    """Train the residual constant-velocity planning model (pipeline/worldmodel/residual.py) on
+    the rollouts, then print its humans' k-step errors beside constant velocity's, with the
+    paired difference's 95% interval (random policy, warm-up 5). Not yet a DVC stage."""
+    params = _load(params_path, None, None)
+    _set_threads(threads)
+    from pipeline.io import check_writable, outputs_together
+    from pipeline.worldmodel import residual
+
+    check_writable(out)
+    result = residual.fit_residual(
+        rollouts, params.env, seed=seed, horizon=horizon, stride=stride,
+        val_fraction=val_fraction, hidden_dim=hidden_dim, learning_rate=learning_rate,
+        batch_size=batch_size, max_epochs=max_epochs, patience=patience,
+    )  # fmt: skip
+    settings = {"seed": seed, "horizon": horizon, "stride": stride, "hidden_dim": hidden_dim}
+    with outputs_together(out) as (tmp,):
+        residual.save_residual(tmp, result, settings)
+    rows = residual.compare_with_constant_velocity(
+        result.model, params.env, episodes=episodes, scenario_seed=scenario_seed, warmup=5,
+        horizon=horizon,
+    )  # fmt: skip
+    m = result.metrics
+    typer.echo(
+        f"best epoch {m['best_epoch']} of {m['epochs']}: validation error {m['val_loss']:.4f} m "
+        f"(constant velocity {m['val_loss_constant_velocity']:.4f} m), "
+        f"{m['cpu_seconds']:.0f} CPU-s"
+    )
+    shown = [row for row in rows if row["k"] in (1, 4, 8, 12, 16)]
+    formats = {c: ".4f" for c in shown[0] if c not in ("k", "n")}
+    _print_table(shown, "humans' mean error (m) k steps ahead", {"n": "d", **formats})
+    typer.echo(f"wrote {out}")
+
+
 @app.command()
 @friendly_errors
 def check(

@@ -145,3 +145,30 @@ def test_the_cli_limits_openmp_spinning_unless_told_otherwise() -> None:
     env["OMP_WAIT_POLICY"] = "ACTIVE"
     out = subprocess.run([sys.executable, "-c", show], env=env, capture_output=True, text=True)
     assert out.stdout.split()[0] == "ACTIVE"
+
+
+def test_train_planning_model_trains_writes_and_compares(tmp_path: Path) -> None:
+    rollouts, out = tmp_path / "rollouts", tmp_path / "planning" / "m.pt"
+    collected = runner.invoke(
+        app,
+        ["collect", "--set", "collect.episodes=24", "--set", "collect.num_envs=24",
+         "--out", str(rollouts), "--metrics", str(tmp_path / "c.json"), "--no-tracking",
+         "--quiet"],
+    )  # fmt: skip
+    assert collected.exit_code == 0, collected.output
+    result = runner.invoke(
+        app,
+        ["train-planning-model", "--rollouts", str(rollouts), "--out", str(out),
+         "--max-epochs", "1", "--horizon", "4", "--episodes", "8", "--hidden-dim", "8"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert out.exists() and "constant" in result.output and "wrote" in result.output
+
+
+def test_train_planning_model_names_missing_rollouts(tmp_path: Path) -> None:
+    result = runner.invoke(
+        app, ["train-planning-model", "--rollouts", str(tmp_path / "none"), "--out",
+              str(tmp_path / "m.pt")],
+    )  # fmt: skip
+    assert result.exit_code != 0
+    assert "none" in result.output and "Traceback" not in result.output

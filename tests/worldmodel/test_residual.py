@@ -1,0 +1,159 @@
+"""The residual constant-velocity planning model (pipeline/worldmodel/residual.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from pipeline.env.params import EnvParams
+from pipeline.planning.models import ConstantVelocityModel
+from pipeline.planning.mpc import Planner
+from pipeline.planning.params import PlanningParams
+from pipeline.worldmodel import residual
+from pipeline.worldmodel.ego import advance, commands_of, positions, predict_positions
+from pipeline.worldmodel.prediction import random_policy, record
+
+ENV = EnvParams()
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return record(ENV, random_policy(3), seed=5, scenario_ids=np.arange(48), steps=24)
+
+
+def rows_of(rec):
+    """The recording as rollout rows (obs, action, episode id, next obs), real steps only."""
+    obs, actions, ids, next_obs = [], [], [], []
+    for n in range(rec.obs.shape[1]):
+        steps = np.flatnonzero(rec.stepped[:, n])
+        obs.append(rec.obs[steps, n])
+        next_obs.append(rec.obs[steps + 1, n])
+        actions.append(rec.actions[steps, n])
+        ids.append(np.full(len(steps), n))
+    return tuple(np.concatenate(x) for x in (obs, actions, ids, next_obs))
+
+
+def perturbed(seed: int = 0) -> residual.ResidualDynamics:
+    torch.manual_seed(seed)
+    model = residual.ResidualDynamics(ENV.num_humans, 16, ENV.dt)
+    with torch.no_grad():
+        model.net[-1].weight.normal_(0.0, 0.05)
+    return model
+
+
+def test_ego_advance_in_torch_equals_numpy_for_every_action() -> None:
+    rng = np.random.default_rng(0)
+    points, velocity = rng.normal(size=(4, 4, 2)), rng.normal(scale=0.1, size=(4, 4, 2))
+    v, w = commands_of(np.arange(4), ENV)
+    expected = advance(points, velocity, v, w, ENV.dt)
+    got = residual.ego_advance(*(torch.from_numpy(x) for x in (points, velocity, v, w)), ENV.dt)
+    for e, g in zip(expected, got, strict=True):
+        np.testing.assert_allclose(g.numpy(), e, atol=1e-12)
+
+
+def test_an_untrained_model_is_constant_velocity(recording) -> None:
+    model = residual.ResidualDynamics(ENV.num_humans, 16, ENV.dt)
+    start = (recording.obs[2], recording.obs[3], recording.actions[2])
+    future = recording.actions[3:9].T
+    ours = residual.residual_positions(model, *start, future, ENV)
+    cv = predict_positions("constant-velocity", *start, future, ENV)
+    np.testing.assert_allclose(ours, cv, atol=1e-12)
+
+
+def test_a_trained_correction_changes_the_humans_and_never_the_goal(recording) -> None:
+    model = perturbed()
+    start = (recording.obs[2], recording.obs[3], recording.actions[2])
+    future = recording.actions[3:9].T
+    ours = residual.residual_positions(model, *start, future, ENV)
+    cv = predict_positions("constant-velocity", *start, future, ENV)
+    np.testing.assert_allclose(ours[:, :, 0], cv[:, :, 0], atol=1e-12)
+    assert np.abs(ours[:, :, 1:] - cv[:, :, 1:]).max() > 1e-3
+
+
+def test_positions_do_not_depend_on_the_batch_size(recording) -> None:
+    model = perturbed(1)
+    start = (recording.obs[2], recording.obs[3], recording.actions[2])
+    future = recording.actions[3:9].T
+    one = residual.residual_positions(model, *start, future, ENV, batch_size=1)
+    many = residual.residual_positions(model, *start, future, ENV, batch_size=512)
+    np.testing.assert_allclose(one, many, rtol=0, atol=1e-12)
+
+
+def test_sequences_follow_the_episodes_and_mask_their_ends(recording) -> None:
+    obs, actions, ids, next_obs = rows_of(recording)
+    seqs = residual.make_sequences(obs, actions, ids, next_obs, horizon=5, stride=3)
+    assert len(seqs) > 0
+    for i in range(len(seqs)):
+        # Find the sample's episode and step from its present observation.
+        n, t = next(
+            (n, t)
+            for n in range(recording.obs.shape[1])
+            for t in range(1, recording.obs.shape[0])
+            if np.array_equal(recording.obs[t, n], seqs.obs[i])
+        )
+        np.testing.assert_array_equal(seqs.previous_obs[i], recording.obs[t - 1, n])
+        assert seqs.previous_action[i] == recording.actions[t - 1, n]
+        for k in range(5):
+            real = t + k < recording.obs.shape[0] - 1 and recording.stepped[t + k, n]
+            assert seqs.mask[i, k] == real
+            if real:
+                np.testing.assert_array_equal(
+                    seqs.targets[i, k], positions(recording.obs[t + k + 1, n])
+                )
+                assert seqs.actions[i, k] == recording.actions[t + k, n]
+        if i >= 40:
+            break
+
+
+def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> None:
+    obs, actions, ids, next_obs = rows_of(recording)
+    train, val = ids < 36, ids >= 36
+    seqs = [
+        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon=6, stride=2)
+        for m in (train, val)
+    ]
+    result = residual.train_residual(
+        *seqs, ENV, hidden_dim=16, learning_rate=1e-3, batch_size=32, max_epochs=3,
+        patience=2, seed=0,
+    )  # fmt: skip
+    m = result.metrics
+    assert m["val_loss"] <= m["val_loss_constant_velocity"]
+    assert m["val_loss"] == min(row["val_loss"] for row in result.history)
+    assert all(np.isfinite(row["train_loss"]) for row in result.history[1:])
+    v = seqs[1]
+    ours = residual.residual_positions(
+        result.model, v.previous_obs, v.obs, v.previous_action, v.actions, ENV
+    )
+    copy_last = np.repeat(positions(v.obs)[:, None], v.actions.shape[1], axis=1)
+    error = np.linalg.norm(ours - v.targets, axis=-1)[..., 1:].mean(-1)[v.mask].mean()
+    copy_error = np.linalg.norm(copy_last - v.targets, axis=-1)[..., 1:].mean(-1)[v.mask].mean()
+    assert error < copy_error
+
+
+def test_a_planner_on_the_untrained_model_scores_as_cv_mpc(recording) -> None:
+    planning = PlanningParams(horizon=4, prefix_length=2)
+    ours = residual.ResidualPlanningModel(residual.ResidualDynamics(3, 8, ENV.dt), ENV)
+    cv = ConstantVelocityModel(ENV)
+    for model in (ours, cv):
+        model.reset(recording.obs[0])
+        model.observe(recording.obs[1], recording.actions[0])
+    # The residual model imagines in float32, constant velocity in float64.
+    np.testing.assert_allclose(
+        Planner(ours, planning, ENV).scores(recording.obs[1][:, :2]),
+        Planner(cv, planning, ENV).scores(recording.obs[1][:, :2]),
+        atol=1e-4,
+    )
+
+
+def test_save_and_load_round_trip_and_refuse_other_files(tmp_path) -> None:
+    model = perturbed(2)
+    result = residual.ResidualTrainResult(model=model, history=[], metrics={})
+    path = tmp_path / "m.pt"
+    residual.save_residual(path, result, {"seed": 0})
+    loaded = residual.load_residual(path)
+    for a, b in zip(model.state_dict().values(), loaded.state_dict().values(), strict=True):
+        torch.testing.assert_close(a, b)
+    torch.save({"format": "other"}, tmp_path / "x.pt")
+    with pytest.raises(ValueError, match="not a socnav-wm residual-cv planning model"):
+        residual.load_residual(tmp_path / "x.pt")
