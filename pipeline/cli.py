@@ -539,7 +539,8 @@ def train_planning_model(
     )  # fmt: skip
     m = result.metrics
     typer.echo(
-        f"best epoch {m['best_epoch']} of {m['epochs']}: validation error {m['val_loss']:.4f} m "
+        f"{m['train_samples']} training samples; best epoch {m['best_epoch']} of {m['epochs']}: "
+        f"validation error {m['val_loss']:.4f} m "
         f"(constant velocity {m['val_loss_constant_velocity']:.4f} m), "
         f"{m['cpu_seconds']:.0f} CPU-s"
     )

@@ -310,6 +310,7 @@ def train_residual(
         "val_loss": best,
         "val_loss_constant_velocity": history[0]["val_loss"],
         "epochs": len(history) - 1,
+        "train_samples": len(train),
         "cpu_seconds": time.process_time() - start,
     }
     return ResidualTrainResult(model=model, history=history, metrics=metrics)
