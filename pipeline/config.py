@@ -45,10 +45,12 @@ __all__ = [
     "Device",
     "EvalParams",
     "ExperimentParams",
+    "PlanningModelParams",
     "LstmParams",
     "Params",
     "ReportParams",
     "STAGE_SECTIONS",
+    "StudyParams",
     "VaeParams",
     "flatten",
     "load_params",
@@ -133,6 +135,23 @@ class LstmParams(Section):
     """`auto` uses CUDA when available, else the CPU."""
 
 
+def _known_distinct_variants(value: list[str]) -> list[str]:
+    for name in value:
+        if name not in VARIANT_NAMES:
+            raise ValueError(f"unknown {name!r}; expected some of {', '.join(VARIANT_NAMES)}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"a variant is listed twice in {value}")
+    return value
+
+
+def _distinct_non_negative(value: list[int]) -> list[int]:
+    if any(seed < 0 for seed in value):
+        raise ValueError(f"must be non-negative, got {value}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"a seed is listed twice in {value}")
+    return value
+
+
 class ExperimentParams(Section):
     """Which agents the pipeline trains: every variant × every seed (``dvc.yaml``'s matrix)."""
 
@@ -146,21 +165,12 @@ class ExperimentParams(Section):
     @field_validator("variants")
     @classmethod
     def _known_variants(cls, value: list[str]) -> list[str]:
-        for name in value:
-            if name not in VARIANT_NAMES:
-                raise ValueError(f"unknown {name!r}; expected some of {', '.join(VARIANT_NAMES)}")
-        if len(set(value)) != len(value):
-            raise ValueError(f"a variant is listed twice in {value}")
-        return value
+        return _known_distinct_variants(value)
 
     @field_validator("seeds")
     @classmethod
     def _distinct_seeds(cls, value: list[int]) -> list[int]:
-        if any(seed < 0 for seed in value):
-            raise ValueError(f"must be non-negative, got {value}")
-        if len(set(value)) != len(value):
-            raise ValueError(f"a seed is listed twice in {value}")
-        return value
+        return _distinct_non_negative(value)
 
 
 class EvalParams(Section):
@@ -212,6 +222,84 @@ class ReportParams(Section):
         return value
 
 
+class PlanningModelParams(Section):
+    """The planning world model (pipeline/worldmodel/residual.py): constant velocity with the
+    robot's own motion exact, plus a learned per-human correction of each human's velocity,
+    trained through open-loop rollouts of ``horizon`` steps on the collected rollouts."""
+
+    SECTION: ClassVar[str] = "planning_model"
+
+    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=1)
+    """Training seeds (initialisation, shuffles, split); one model file per seed, seed 0's plans
+    for ``wm-mpc``."""
+    horizon: int = Field(16, gt=0)
+    """Open-loop steps in the loss (the planner looks 12 ahead)."""
+    stride: int = Field(4, gt=0)
+    """Steps between the starts of consecutive training samples of an episode."""
+    hidden_dim: int = Field(64, gt=0)
+    """Width of the correction's two hidden layers."""
+    learning_rate: float = Field(1e-4, gt=0, allow_inf_nan=False)
+    """Adam's step."""
+    batch_size: int = Field(256, gt=0)
+    """Samples per update."""
+    max_epochs: int = Field(10, gt=0)
+    """Epochs at most."""
+    patience: int = Field(3, gt=0)
+    """Epochs without a better validation loss before stopping (the best epoch is kept)."""
+    val_fraction: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
+    """Share of the rollout episodes held out for validation."""
+
+    @field_validator("seeds")
+    @classmethod
+    def _distinct_seeds(cls, value: list[int]) -> list[int]:
+        return _distinct_non_negative(value)
+
+
+class StudyParams(Section):
+    """One study: every variant × seed × combination of the grid's values, each run exactly
+    ``train-agent --set key=value …`` then its evaluation (``socnav-wm sweep``)."""
+
+    SECTION: ClassVar[str] = "studies.<name>"
+
+    variants: list[str] = Field(default_factory=lambda: list(VARIANT_NAMES), min_length=1)
+    """Agent variants of the grid."""
+    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
+    """Training seeds of the grid."""
+    grid: dict[str, list[Any]] = Field(default_factory=dict)
+    """Dotted ``params.yaml`` keys and the values each takes (empty: the shipped values)."""
+
+    @field_validator("variants")
+    @classmethod
+    def _known_variants(cls, value: list[str]) -> list[str]:
+        return _known_distinct_variants(value)
+
+    @field_validator("seeds")
+    @classmethod
+    def _distinct_seeds(cls, value: list[int]) -> list[int]:
+        return _distinct_non_negative(value)
+
+    @field_validator("grid")
+    @classmethod
+    def _known_keys(cls, value: dict[str, list[Any]]) -> dict[str, list[Any]]:
+        for key, values in value.items():
+            if key.split(".")[0] not in ("agent", "env"):
+                raise ValueError(f"{key!r}: a study varies agent.* or env.* keys only")
+            if not _key_known(key):
+                raise ValueError(_unknown_key(key))
+            if not values:
+                raise ValueError(f"{key!r}: expected at least one value")
+        return value
+
+
+def _default_studies() -> dict[str, StudyParams]:
+    return {
+        "horizon": StudyParams(
+            variants=["2stepahead", "2stepahead-maspm"], grid={"agent.horizon": [2, 4, 8, 16]}
+        ),
+        "seeds": StudyParams(),
+    }
+
+
 class Params(Section):
     """Everything ``params.yaml`` can hold; every section is optional."""
 
@@ -235,8 +323,12 @@ class Params(Section):
     """ORCA and Social Force robots."""
     planning: PlanningParams = Field(default_factory=PlanningParams)
     """The planners (cv-mpc); see pipeline/planning/params.py."""
+    planning_model: PlanningModelParams = Field(default_factory=PlanningModelParams)
+    """The planning world model (wm-mpc's); see pipeline/worldmodel/residual.py."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
+    studies: dict[str, StudyParams] = Field(default_factory=_default_studies)
+    """Named grids of agent runs outside the default pipeline (``socnav-wm sweep --study``)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -318,6 +410,16 @@ def _child(node: Any, part: str) -> tuple[bool, Any]:
 
 def _is_model(node: Any) -> bool:
     return isinstance(node, type) and issubclass(node, BaseModel)
+
+
+def _key_known(dotted: str) -> bool:
+    """Whether a dotted key names a field of :class:`Params` (a free mapping takes any key)."""
+    node: Any = Params
+    for part in dotted.split("."):
+        known, node = _child(node, part)
+        if not known:
+            return False
+    return True
 
 
 def _unknown_key(dotted: str) -> str:
@@ -491,7 +593,10 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "evaluate": ("env", "eval", "experiment.seeds"),
     "evaluate_baseline": ("env", "eval", "baselines"),
     "evaluate_planner": ("env", "eval", "planning"),
+    "train_planning_model": ("env", "planning_model"),
     "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
+    "study_horizon": ("env", "agent", "eval", "studies.horizon"),
+    "study_seeds": ("env", "agent", "eval", "studies.seeds"),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
 name is one key of a section). ``evaluate_baseline`` reads ``baselines.<its baseline>`` only:
