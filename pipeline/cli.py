@@ -457,6 +457,10 @@ def predict(
     epsilon: Annotated[
         float, typer.Option(min=0.0, max=1.0, help="Exploration of the agent's policy.")
     ] = 0.2,
+    planning_model: Annotated[
+        list[Path] | None,
+        typer.Option(help="A planning world model file (repeat: one per training seed)."),
+    ] = None,
     out: Annotated[Path, typer.Option(help="The errors (JSON).")] = Path("metrics/prediction.json"),
     figure: Annotated[Path, typer.Option(help="Error against k (PNG).")] = Path(
         "reports/prediction.png"
@@ -464,9 +468,10 @@ def predict(
     no_tracking: NoTrackingOption = False,
     threads: ThreadsOption = None,
 ) -> None:
-    """k-step prediction errors in metres of the world model (VAE + LSTM) beside copy-last,
-    static humans and constant velocity (the robot's own motion exact), under the random policy
-    and a trained agent's ε-greedy one, open loop with the true actions."""
+    """k-step prediction errors in metres of the world model (VAE + LSTM) and the planning world
+    model's seeds beside copy-last, static humans and constant velocity (the robot's own motion
+    exact), under the random policy and a trained agent's ε-greedy one, open loop with the true
+    actions."""
     params = _load(params_path, None, None)
     _set_threads(threads)
     from pipeline.stages import predict as stage
@@ -482,6 +487,7 @@ def predict(
         warmup=warmup,
         horizon=horizon,
         epsilon=epsilon,
+        planning_models=planning_model,
         out=out,
         figure=figure,
         tracking=not no_tracking,
@@ -490,6 +496,25 @@ def predict(
         table = error_table(errors)
         formats = {c: ".3f" for c in table[0] if c not in ("k", "n")} if table else {}
         _print_table(table, f"{policy} policy: mean error (m) k steps ahead", {"n": "d", **formats})
+        versus = errors.get("planning_model")
+        if versus:
+            rows = [
+                {"k": k, "difference": d, "low": ci[0], "high": ci[1], "verdict": v}
+                for k, d, ci, v in zip(
+                    errors["k"],
+                    versus["difference"],
+                    versus["difference_ci"],
+                    versus["verdict"],
+                    strict=True,
+                )  # fmt: skip
+                if k in (1, 4, 8, 12, 16)
+            ]
+            _print_table(
+                rows,
+                f"{policy} policy: planning model − constant velocity, humans (m), "
+                f"{versus['seeds']} seeds",
+                {"difference": "+.4f", "low": "+.4f", "high": "+.4f"},
+            )
     typer.echo(f"wrote {out} and {figure}")
 
 
@@ -497,57 +522,41 @@ def predict(
 @friendly_errors
 def train_planning_model(
     params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    overlays: OverlayOption = None,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Training seed (one of planning_model.seeds).")
+    ] = 0,
     rollouts: Annotated[Path, typer.Option(help="The rollouts (collect's output).")] = Path(
         "data/rollouts"
     ),
-    out: Annotated[Path, typer.Option(help="The model file.")] = Path(
-        "models/planning/residual-cv.pt"
+    out_dir: Annotated[Path, typer.Option(help="Where seed-N.pt is written.")] = Path(
+        "models/planning"
     ),
-    seed: Annotated[int, typer.Option(min=0, help="Initialisation, shuffles, split.")] = 0,
-    horizon: Annotated[int, typer.Option(min=1, help="Open-loop steps in the loss.")] = 16,
-    stride: Annotated[int, typer.Option(min=1, help="Steps between training samples.")] = 4,
-    hidden_dim: Annotated[int, typer.Option(min=1, help="Width of the MLP.")] = 64,
-    learning_rate: Annotated[float, typer.Option(min=0.0, help="Adam's step.")] = 1e-4,
-    batch_size: Annotated[int, typer.Option(min=1, help="Samples per update.")] = 256,
-    max_epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 10,
-    patience: Annotated[int, typer.Option(min=1, help="Epochs without progress.")] = 3,
-    val_fraction: Annotated[float, typer.Option(min=0.0, max=0.99, help="Held out.")] = 0.05,
-    episodes: Annotated[int, typer.Option(min=1, help="Scenarios of the comparison.")] = 300,
-    scenario_seed: Annotated[int, typer.Option(min=0, help="Their seed.")] = 2_000_003,
+    metrics_dir: Annotated[Path, typer.Option(help="Where seed-N.json is written.")] = Path(
+        "metrics/planning"
+    ),
     threads: ThreadsOption = None,
+    no_tracking: NoTrackingOption = False,
+    quiet: QuietOption = False,
 ) -> None:
-    """Train the residual constant-velocity planning model (pipeline/worldmodel/residual.py) on
-    the rollouts, then print its humans' k-step errors beside constant velocity's, with the
-    paired difference's 95% interval (random policy, warm-up 5). Not yet a DVC stage."""
-    params = _load(params_path, None, None)
+    """Train the planning world model (pipeline/worldmodel/residual.py: constant velocity plus a
+    learned correction of each human's velocity) on the rollouts (stage `train_planning_model`,
+    params.yaml's planning_model). Its k-step errors are measured by `socnav-wm predict`."""
+    params = _load(params_path, overlays, overrides)
     _set_threads(threads)
-    from pipeline.io import check_writable, outputs_together
-    from pipeline.worldmodel import residual
+    from pipeline.stages import train_planning_model as stage
 
-    check_writable(out)
-    result = residual.fit_residual(
-        rollouts, params.env, seed=seed, horizon=horizon, stride=stride,
-        val_fraction=val_fraction, hidden_dim=hidden_dim, learning_rate=learning_rate,
-        batch_size=batch_size, max_epochs=max_epochs, patience=patience,
-    )  # fmt: skip
-    settings = {"seed": seed, "horizon": horizon, "stride": stride, "hidden_dim": hidden_dim}
-    with outputs_together(out) as (tmp,):
-        residual.save_residual(tmp, result, settings)
-    rows = residual.compare_with_constant_velocity(
-        result.model, params.env, episodes=episodes, scenario_seed=scenario_seed, warmup=5,
-        horizon=horizon,
-    )  # fmt: skip
-    m = result.metrics
-    typer.echo(
-        f"{m['train_samples']} training samples; best epoch {m['best_epoch']} of {m['epochs']}: "
-        f"validation error {m['val_loss']:.4f} m "
-        f"(constant velocity {m['val_loss_constant_velocity']:.4f} m), "
-        f"{m['cpu_seconds']:.0f} CPU-s"
+    message = stage.run(
+        params,
+        seed=seed,
+        rollouts=rollouts,
+        out_dir=out_dir,
+        metrics_dir=metrics_dir,
+        tracking=not no_tracking,
+        quiet=quiet,
     )
-    shown = [row for row in rows if row["k"] in (1, 4, 8, 12, 16)]
-    formats = {c: ".4f" for c in shown[0] if c not in ("k", "n")}
-    _print_table(shown, "humans' mean error (m) k steps ahead", {"n": "d", **formats})
-    typer.echo(f"wrote {out}")
+    typer.echo(message)
 
 
 @app.command()

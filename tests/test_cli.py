@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
+import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
@@ -147,8 +149,8 @@ def test_the_cli_limits_openmp_spinning_unless_told_otherwise() -> None:
     assert out.stdout.split()[0] == "ACTIVE"
 
 
-def test_train_planning_model_trains_writes_and_compares(tmp_path: Path) -> None:
-    rollouts, out = tmp_path / "rollouts", tmp_path / "planning" / "m.pt"
+def test_train_planning_model_trains_and_writes_its_outputs(tmp_path: Path) -> None:
+    rollouts = tmp_path / "rollouts"
     collected = runner.invoke(
         app,
         ["collect", "--set", "collect.episodes=24", "--set", "collect.num_envs=24",
@@ -158,17 +160,33 @@ def test_train_planning_model_trains_writes_and_compares(tmp_path: Path) -> None
     assert collected.exit_code == 0, collected.output
     result = runner.invoke(
         app,
-        ["train-planning-model", "--rollouts", str(rollouts), "--out", str(out),
-         "--max-epochs", "1", "--horizon", "4", "--episodes", "8", "--hidden-dim", "8"],
+        ["train-planning-model", "--rollouts", str(rollouts), "--seed", "1",
+         "--out-dir", str(tmp_path / "models"), "--metrics-dir", str(tmp_path / "metrics"),
+         "--set", "planning_model.max_epochs=1", "--set", "planning_model.horizon=4",
+         "--set", "planning_model.hidden_dim=8", "--set", "planning_model.val_fraction=0.2",
+         "--no-tracking", "--quiet"],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
-    assert out.exists() and "constant" in result.output and "wrote" in result.output
+    assert "constant velocity" in result.output and "wrote" in result.output
+    from pipeline.worldmodel.residual import load_residual
+
+    assert load_residual(tmp_path / "models" / "seed-1.pt").net[0].out_features == 8
+    metrics = json.loads((tmp_path / "metrics" / "seed-1.json").read_text())
+    assert metrics["seed"] == 1 and metrics["epochs"] == 1
+    saved = yaml.safe_load((tmp_path / "models" / "seed-1.params.yaml").read_text())
+    assert set(saved) == {"env", "planning_model"}
+    # A seed outside planning_model.seeds is refused in one line.
+    refused = runner.invoke(
+        app, ["train-planning-model", "--rollouts", str(rollouts), "--seed", "7",
+              "--out-dir", str(tmp_path / "models"), "--no-tracking"],
+    )  # fmt: skip
+    assert refused.exit_code != 0 and "planning_model.seeds" in refused.output
 
 
 def test_train_planning_model_names_missing_rollouts(tmp_path: Path) -> None:
     result = runner.invoke(
-        app, ["train-planning-model", "--rollouts", str(tmp_path / "none"), "--out",
-              str(tmp_path / "m.pt")],
+        app, ["train-planning-model", "--rollouts", str(tmp_path / "none"), "--out-dir",
+              str(tmp_path / "m"), "--no-tracking"],
     )  # fmt: skip
     assert result.exit_code != 0
     assert "none" in result.output and "Traceback" not in result.output

@@ -63,3 +63,15 @@ def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> 
     assert dvc_yaml_differences(target) == []
     assert target.read_text() == text  # data deps, comments and order as they were
     assert write_dvc_yaml(target) is False
+
+
+def test_predict_measures_every_planning_model_seed() -> None:
+    from pipeline.config import load_params
+
+    seeds = load_params(ROOT / "params.yaml").planning_model.seeds
+    stage = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]["predict"]
+    files = [f"models/planning/seed-{seed}.pt" for seed in seeds]
+    words = stage["cmd"].split()
+    passed = [words[i + 1] for i, word in enumerate(words) if word == "--planning-model"]
+    assert passed == files
+    assert [dep for dep in stage["deps"] if dep.startswith("models/planning/")] == files

@@ -457,7 +457,7 @@ RESULTS_METRICS = (
 PREDICTION_KS = (1, 4, 8, 12, 16)
 """The steps ahead shown in the report's prediction table."""
 
-PREDICTOR_ORDER = ("copy-last", "static", "constant-velocity", "vae-lstm")
+PREDICTOR_ORDER = ("copy-last", "static", "constant-velocity", "vae-lstm", "planning-model")
 POLICY_ORDER = ("random", "agent")
 """Columns and tables of the prediction section (the JSON file's keys are sorted)."""
 
@@ -515,6 +515,20 @@ def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
             lines += [
                 f"- {model} predicts the humans better than constant velocity at "
                 f"{_ks(below_cv)}, better than static humans at {_ks(below_static)}.",
+                "",
+            ]
+        versus = errors.get("planning_model")
+        if versus:
+            verdicts = dict(zip(errors["k"], versus["verdict"], strict=True))
+            by = {v: [k for k, w in verdicts.items() if w == v] for v in ("better", "worse")}
+            i = errors["k"].index(max(errors["k"]))
+            low, high = versus["difference_ci"][i]
+            lines += [
+                f"- The planning model ({versus['seeds']} training seeds) against constant "
+                f"velocity, humans, 95% interval over seeds: significantly better at "
+                f"{_ks(by['better'])}, significantly worse at {_ks(by['worse'])}; at "
+                f"k = {errors['k'][i]} the difference is {versus['difference'][i]:+.4f} m "
+                f"[{low:+.4f}, {high:+.4f}].",
                 "",
             ]
     return lines

@@ -27,6 +27,7 @@ STAGE_MODULES: dict[str, str] = {
     "evaluate": "pipeline.stages.evaluate",
     "evaluate_baseline": "pipeline.stages.evaluate",
     "evaluate_planner": "pipeline.stages.evaluate",
+    "train_planning_model": "pipeline.stages.train_planning_model",
     "predict": "pipeline.stages.predict",
     "report": "pipeline.stages.report",
 }

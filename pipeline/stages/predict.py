@@ -1,6 +1,7 @@
 """Stage ``predict``: the world model's k-step prediction errors in metres
 (:mod:`pipeline.worldmodel.prediction`), under the random policy and a trained agent's ε-greedy
-one, to ``metrics/prediction.json``, MLflow and a figure of error against k."""
+one, for the paper's VAE + LSTM and the planning world model's seeds, to
+``metrics/prediction.json``, MLflow and a figure of error against k."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pipeline.evaluation.figures import prediction_figure
 from pipeline.io import check_writable, outputs_together, write_json_atomic
 from pipeline.tracking import stage_run
 from pipeline.worldmodel.prediction import evaluate_prediction
+from pipeline.worldmodel.residual import load_residual
 from pipeline.worldmodel.training import load_lstm, load_vae
 
 SECTIONS: tuple[str, ...] = ("env",)
@@ -32,6 +34,7 @@ def run(
     warmup: int,
     horizon: int,
     epsilon: float,
+    planning_models: list[Path] | None = None,
     out: Path,
     figure: Path,
     tracking: bool = True,
@@ -47,6 +50,7 @@ def run(
             "horizon": horizon,
             "epsilon": epsilon,
             "agent": str(agent) if agent else None,
+            "planning_models": [str(path) for path in planning_models or []],
         },
     }
     with stage_run("predict", settings, enabled=tracking) as mlflow_run:
@@ -59,6 +63,7 @@ def run(
             warmup=warmup,
             horizon=horizon,
             epsilon=epsilon,
+            planning_models=[load_residual(path) for path in planning_models or []],
         )
         with outputs_together(out, figure) as (out_tmp, figure_tmp):
             write_json_atomic(out_tmp, result)

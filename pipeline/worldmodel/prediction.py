@@ -12,8 +12,12 @@ Predictors: the three of :mod:`pipeline.worldmodel.ego` (``copy-last``, ``static
 ``constant-velocity``; the robot's own motion exact in the last two) and the paper's VAE + LSTM
 (``vae-lstm``): the VAE encodes every real observation (its mean), the LSTM is teacher-forced
 along the real trajectory up to the present, then fed its own predicted latents; each latent is
-decoded by the VAE. Its ``k = 0`` error is the VAE's alone (decode(encode(obs))). The networks
-run in float64 copies, so the errors do not depend on the batch size.
+decoded by the VAE. Its ``k = 0`` error is the VAE's alone (decode(encode(obs))). With
+planning models (:mod:`pipeline.worldmodel.residual`, one per training seed), ``planning-model``
+is their mean over seeds, with the 95% interval over seeds, and ``planning_model`` compares them
+with constant velocity: per seed the mean paired difference over episodes, then its mean and
+95% interval over seeds (negative: the learned model is nearer the truth). The networks run in
+float64 copies, so the errors do not depend on the batch size.
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ from pipeline.worldmodel.ego import PREDICTORS, positions, predict_positions
 
 MODEL_PREDICTOR = "vae-lstm"
 """The name of the paper's world model among the predictors."""
+PLANNING_PREDICTOR = "planning-model"
+"""The name of the planning world model (its mean over training seeds) among the predictors."""
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """``policy(obs (N, D)) → actions (N,)``, called once per step for every episode."""
@@ -157,6 +163,45 @@ def _summaries(errors: np.ndarray, valid: np.ndarray) -> dict[str, list[Any]]:
     return out
 
 
+def _over_seeds(per_seed: Sequence[np.ndarray], valid: np.ndarray) -> dict[str, list[Any]]:
+    """Per k: the mean over seeds of each seed's mean error (goal; humans), with the 95%
+    t-interval over seeds."""
+    out: dict[str, list[Any]] = {"goal": [], "goal_ci": [], "humans": [], "humans_ci": []}
+    for k in range(valid.shape[1]):
+        rows = valid[:, k]
+        for name, part in (("goal", slice(0, 1)), ("humans", slice(1, None))):
+            means = np.array([e[rows, k, part].mean() for e in per_seed])
+            mean, low, high = _mean_ci(means)
+            out[name].append(mean)
+            out[f"{name}_ci"].append([low, high])
+    return out
+
+
+def _versus_constant_velocity(
+    per_seed: Sequence[np.ndarray], cv: np.ndarray, valid: np.ndarray
+) -> dict[str, Any]:
+    """Per k: each seed's humans' error, its mean paired difference from constant velocity over
+    episodes, and the difference's mean and 95% interval over seeds with a verdict."""
+    out: dict[str, Any] = {"seeds": len(per_seed), "humans_per_seed": [], "difference": []}
+    out.update({"difference_ci": [], "verdict": []})
+    for k in range(valid.shape[1]):
+        rows = valid[:, k]
+        humans = [float(e[rows, k, 1:].mean()) for e in per_seed]
+        differences = np.array([(e[rows, k, 1:] - cv[rows, k, 1:]).mean() for e in per_seed])
+        mean, low, high = _mean_ci(differences)
+        if len(per_seed) == 1:  # one seed: the interval over episodes of its paired difference
+            paired = (per_seed[0][rows, k, 1:] - cv[rows, k, 1:]).mean(axis=-1)
+            mean, low, high = _mean_ci(paired)
+        verdict = "better" if high < 0 else "worse" if low > 0 else "no different"
+        if math.isnan(low):
+            verdict = "better" if mean < 0 else "worse" if mean > 0 else "no different"
+        out["humans_per_seed"].append(humans)
+        out["difference"].append(mean)
+        out["difference_ci"].append([low, high])
+        out["verdict"].append(verdict)
+    return out
+
+
 def prediction_errors(
     recording: Recording,
     env_params: EnvParams,
@@ -164,13 +209,16 @@ def prediction_errors(
     warmup: int,
     horizon: int,
     world_model: tuple[Any, Any] | None = None,
+    planning_models: Sequence[Any] = (),
     batch_size: int = 512,
 ) -> dict[str, Any]:
     """k-step errors (m) of every predictor on a recording.
 
     Returns ``{"k": [1…horizon], "n": [episodes counted at each k], "predictors": {name:
     {"goal", "goal_ci", "humans", "humans_ci"}}}``; the model's entry (with ``world_model =
-    (vae, lstm)``) also has ``"k0": {"goal", "humans"}``, the VAE's own error.
+    (vae, lstm)``) also has ``"k0": {"goal", "humans"}``, the VAE's own error. With
+    ``planning_models`` (one per training seed), ``"planning_model"`` holds per k the seeds'
+    humans' errors and the difference from constant velocity (module docstring).
     """
     if warmup < 1:
         raise ValueError(f"warmup: must be at least 1 (a velocity needs two views), got {warmup}")
@@ -211,6 +259,17 @@ def prediction_errors(
     for name, prediction in predicted.items():
         errors = np.linalg.norm(prediction - truth, axis=-1)  # (N, K, 1 + H)
         result["predictors"][name] = _summaries(errors, valid)
+    if planning_models:
+        from pipeline.worldmodel.residual import residual_positions
+
+        start = (recording.obs[t0 - 1], recording.obs[t0], recording.actions[t0 - 1])
+        cv = np.linalg.norm(predicted["constant-velocity"] - truth, axis=-1)
+        per_seed = [
+            np.linalg.norm(residual_positions(m, *start, future, env_params) - truth, axis=-1)
+            for m in planning_models
+        ]  # each (N, K, 1 + H)
+        result["predictors"][PLANNING_PREDICTOR] = _over_seeds(per_seed, valid)
+        result["planning_model"] = _versus_constant_velocity(per_seed, cv, valid)
     if now is not None:
         present = valid[:, 0]
         error_now = np.linalg.norm(now - positions(recording.obs[t0]), axis=-1)[present]
@@ -246,10 +305,11 @@ def evaluate_prediction(
     warmup: int,
     horizon: int,
     epsilon: float,
+    planning_models: Sequence[Any] = (),
     batch_size: int = 512,
 ) -> dict[str, Any]:
-    """The errors of every predictor under the random policy and, with ``agent``, under its
-    ε-greedy policy: ``{"settings": {…}, "policies": {"random": …, "agent": …}}``, each policy's
+    """The errors of every predictor (``planning_models``: the planning world model's seeds)
+    under the random policy and, with ``agent``, under its ε-greedy policy: ``{"settings": {…}, "policies": {"random": …, "agent": …}}``, each policy's
     entry as :func:`prediction_errors` returns it. Both policies run scenarios
     ``0..episodes−1`` of ``scenario_seed``."""
     for name, value, low in (("episodes", episodes, 1), ("horizon", horizon, 1)):
@@ -269,6 +329,7 @@ def evaluate_prediction(
             "horizon": horizon,
             "epsilon": epsilon,
             "agent": None if agent is None else agent.variant_name,
+            "planning_model_seeds": len(planning_models),
         },
         "policies": {},
     }
@@ -276,6 +337,6 @@ def evaluate_prediction(
         recording = record(env_params, policy, scenario_seed, ids, warmup + horizon)
         result["policies"][name] = prediction_errors(
             recording, env_params, warmup=warmup, horizon=horizon, world_model=world_model,
-            batch_size=batch_size,
+            planning_models=planning_models, batch_size=batch_size,
         )  # fmt: skip
     return result

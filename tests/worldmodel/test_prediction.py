@@ -86,3 +86,65 @@ def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_
     with pytest.raises(ValueError, match="epsilon"):
         evaluate_prediction(ENV, world_model=world_model, agent=None, episodes=5,
                             scenario_seed=3, warmup=2, horizon=3, epsilon=1.5)  # fmt: skip
+
+
+def _planning_models(count: int, perturbed: bool):
+    from pipeline.worldmodel.residual import ResidualDynamics
+
+    models = []
+    for seed in range(count):
+        torch.manual_seed(seed)
+        model = ResidualDynamics(ENV.num_humans, 8, ENV.dt)
+        if perturbed:  # the untrained model is constant velocity; this one is not
+            torch.nn.init.normal_(model.net[-1].weight, std=0.5)
+        models.append(model)
+    return models
+
+
+def test_the_untrained_planning_model_is_constant_velocity_on_every_seed(recording) -> None:
+    from pipeline.worldmodel.prediction import PLANNING_PREDICTOR
+
+    errors = prediction_errors(
+        recording, ENV, warmup=3, horizon=6, planning_models=_planning_models(3, False)
+    )
+    np.testing.assert_allclose(
+        errors["predictors"][PLANNING_PREDICTOR]["humans"],
+        errors["predictors"]["constant-velocity"]["humans"],
+        atol=1e-9,
+    )
+    versus = errors["planning_model"]
+    assert versus["seeds"] == 3 and versus["verdict"] == ["no different"] * 6
+    assert max(abs(d) for d in versus["difference"]) < 1e-9
+
+
+def test_a_perturbed_planning_model_is_measured_worse_and_batch_size_does_not_matter(
+    recording,
+) -> None:
+    from pipeline.worldmodel.prediction import PLANNING_PREDICTOR
+
+    models = _planning_models(3, True)
+    one = prediction_errors(recording, ENV, warmup=3, horizon=6, planning_models=models,
+                            batch_size=1)  # fmt: skip
+    many = prediction_errors(recording, ENV, warmup=3, horizon=6, planning_models=models)
+    for key in ("goal", "humans"):
+        np.testing.assert_allclose(
+            one["predictors"][PLANNING_PREDICTOR][key],
+            many["predictors"][PLANNING_PREDICTOR][key],
+            rtol=0, atol=1e-12,
+        )  # fmt: skip
+    versus = many["planning_model"]
+    assert versus["verdict"][-1] == "worse" and versus["difference"][-1] > 0
+    low, high = versus["difference_ci"][-1]
+    assert low <= versus["difference"][-1] <= high
+    # The goal is kinematics: exact for the learned model too.
+    assert max(many["predictors"][PLANNING_PREDICTOR]["goal"]) < 1e-5
+    from pipeline.evaluation.rendering import prediction_section
+
+    section = "\n".join(
+        prediction_section(
+            {"settings": {"warmup": 3, "episodes": 24, "scenario_seed": 11, "agent": None,
+                          "epsilon": 0.0}, "policies": {"random": many}}
+        )
+    )  # fmt: skip
+    assert "| planning-model: humans |" in section.replace("k | n |", "")
+    assert "significantly worse at k = " in section
