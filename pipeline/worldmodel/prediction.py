@@ -309,9 +309,10 @@ def evaluate_prediction(
     batch_size: int = 512,
 ) -> dict[str, Any]:
     """The errors of every predictor (``planning_models``: the planning world model's seeds)
-    under the random policy and, with ``agent``, under its ε-greedy policy: ``{"settings": {…}, "policies": {"random": …, "agent": …}}``, each policy's
-    entry as :func:`prediction_errors` returns it. Both policies run scenarios
-    ``0..episodes−1`` of ``scenario_seed``."""
+    under the random policy and, with ``agent``, under its ε-greedy policy:
+    ``{"settings": {…}, "policies": {"random": …, "agent": …}}``, each policy's entry as
+    :func:`prediction_errors` returns it. Both policies run scenarios ``0..episodes−1`` of
+    ``scenario_seed``."""
     for name, value, low in (("episodes", episodes, 1), ("horizon", horizon, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
