@@ -496,6 +496,23 @@ def predict(
         table = error_table(errors)
         formats = {c: ".3f" for c in table[0] if c not in ("k", "n")} if table else {}
         _print_table(table, f"{policy} policy: mean error (m) k steps ahead", {"n": "d", **formats})
+        change = errors.get("goal_change")
+        if change:
+            rows = []
+            for i, k in enumerate(errors["k"]):
+                if k not in (1, 4, 8, 12, 16):
+                    continue
+                row: dict[str, Any] = {"k": k, "new goal": change["changed_share"][i]}
+                for name, values in change["predictors"].items():
+                    if name in ("constant-velocity", "planning-model"):
+                        row[f"{name}: kept"] = values["kept"][i]
+                        row[f"{name}: new"] = values["changed"][i]
+                rows.append(row)
+            _print_table(
+                rows,
+                f"{policy} policy: humans' error (m) by whether they drew a new goal",
+                {c: ".3f" for c in rows[0] if c != "k"} if rows else {},
+            )
         versus = errors.get("planning_model")
         if versus:
             rows = [

@@ -517,6 +517,21 @@ def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
                 f"{_ks(below_cv)}, better than static humans at {_ks(below_static)}.",
                 "",
             ]
+        change = errors.get("goal_change")
+        if change:
+            i = errors["k"].index(max(errors["k"]))
+            parts = [
+                f"{name} {values['kept'][i]:.3f} m for those who kept their goal, "
+                f"{values['changed'][i]:.3f} m for the others"
+                for name, values in change["predictors"].items()
+                if name in ("constant-velocity", "planning-model", "vae-lstm")
+            ]
+            lines += [
+                f"- Humans draw a new goal when they reach theirs, and goals are not observed: "
+                f"{change['changed_share'][i]:.0%} of the humans did within k = "
+                f"{errors['k'][i]} steps. At that k: " + "; ".join(parts) + ".",
+                "",
+            ]
         versus = errors.get("planning_model")
         if versus:
             verdicts = dict(zip(errors["k"], versus["verdict"], strict=True))

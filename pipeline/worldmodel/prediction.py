@@ -51,11 +51,14 @@ class Recording:
         obs: (T + 1, N, D) float64 observations, ``obs[t]`` after ``t`` steps.
         actions: (T, N) int64, ``actions[t]`` taken at step ``t``.
         stepped: (T, N) bool, step ``t`` was a real step of a running episode.
+        goal_index: (T + 1, N, H) int64, how many goals each human had reached by ``obs[t]``
+            (the simulator's count; not in the observation), or None.
     """
 
     obs: np.ndarray
     actions: np.ndarray
     stepped: np.ndarray
+    goal_index: np.ndarray | None = None
 
 
 def record(
@@ -66,14 +69,16 @@ def record(
     sim = Simulator(len(ids), env_params)
     obs, _ = sim.reset(seed=seed, scenario_ids=ids)
     all_obs, actions, stepped = [np.asarray(obs, dtype=np.float64)], [], []
+    goal_index = [sim.state.human_goal_index.copy()]
     for _ in range(steps):
         running = ~sim.state.done.copy()
         a = np.asarray(policy(obs), dtype=np.int64)
         obs = sim.step(a).obs
         all_obs.append(np.asarray(obs, dtype=np.float64))
+        goal_index.append(sim.state.human_goal_index.copy())
         actions.append(a)
         stepped.append(running)
-    return Recording(np.stack(all_obs), np.stack(actions), np.stack(stepped))
+    return Recording(np.stack(all_obs), np.stack(actions), np.stack(stepped), np.stack(goal_index))
 
 
 def random_policy(seed: int) -> Policy:
@@ -160,6 +165,31 @@ def _summaries(errors: np.ndarray, valid: np.ndarray) -> dict[str, list[Any]]:
             mean, low, high = _mean_ci(values)
             out[name].append(mean)
             out[f"{name}_ci"].append([low, high])
+    return out
+
+
+def _by_goal_change(
+    errors_of: Mapping[str, np.ndarray], valid: np.ndarray, goal_index: np.ndarray, t0: int
+) -> dict[str, Any]:
+    """Per k: the share of humans who drew a new goal between the velocity's first view
+    (``t0 − 1``) and ``t0 + k`` (their turn cannot be foreseen: goals are not observed), and
+    each predictor's humans' error (``errors_of``: (N, K, 1 + H) each) over those who kept
+    their goal and over those who did not."""
+    horizon = valid.shape[1]
+    changed = np.stack(
+        [goal_index[t0 + k] != goal_index[t0 - 1] for k in range(1, horizon + 1)], axis=1
+    )  # (N, K, H)
+    out: dict[str, Any] = {"changed_share": [], "predictors": {}}
+    for k in range(horizon):
+        out["changed_share"].append(float(changed[valid[:, k], k].mean()))
+    for name, all_errors in errors_of.items():
+        errors = all_errors[..., 1:]  # (N, K, H)
+        kept, new = [], []
+        for k in range(horizon):
+            e, c = errors[valid[:, k], k], changed[valid[:, k], k]
+            kept.append(float(e[~c].mean()) if (~c).any() else math.nan)
+            new.append(float(e[c].mean()) if c.any() else math.nan)
+        out["predictors"][name] = {"kept": kept, "changed": new}
     return out
 
 
@@ -270,6 +300,11 @@ def prediction_errors(
         ]  # each (N, K, 1 + H)
         result["predictors"][PLANNING_PREDICTOR] = _over_seeds(per_seed, valid)
         result["planning_model"] = _versus_constant_velocity(per_seed, cv, valid)
+    if recording.goal_index is not None:
+        errors_of = {n: np.linalg.norm(p - truth, axis=-1) for n, p in predicted.items()}
+        if planning_models:
+            errors_of[PLANNING_PREDICTOR] = np.mean(per_seed, axis=0)
+        result["goal_change"] = _by_goal_change(errors_of, valid, recording.goal_index, t0)
     if now is not None:
         present = valid[:, 0]
         error_now = np.linalg.norm(now - positions(recording.obs[t0]), axis=-1)[present]

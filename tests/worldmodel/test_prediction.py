@@ -148,3 +148,20 @@ def test_a_perturbed_planning_model_is_measured_worse_and_batch_size_does_not_ma
     )  # fmt: skip
     assert "| planning-model: humans |" in section.replace("k | n |", "")
     assert "significantly worse at k = " in section
+
+
+def test_errors_are_split_by_whether_a_human_drew_a_new_goal() -> None:
+    rec = record(ENV, random_policy(1), seed=5, scenario_ids=np.arange(40), steps=21)
+    errors = prediction_errors(rec, ENV, warmup=5, horizon=16)
+    change = errors["goal_change"]
+    shares = change["changed_share"]
+    assert all(0.0 <= s <= 1.0 for s in shares) and shares[-1] >= shares[0]
+    assert shares[-1] > 0  # at 16 steps some human reaches its goal
+    cv = change["predictors"]["constant-velocity"]
+    # A human who kept its goal walks nearly straight: constant velocity is far better there.
+    assert cv["kept"][-1] < cv["changed"][-1]
+    # The split is exhaustive: the share-weighted parts give the overall mean (same rows).
+    k = len(shares) - 1
+    overall = errors["predictors"]["constant-velocity"]["humans"][k]
+    mixed = shares[k] * cv["changed"][k] + (1 - shares[k]) * cv["kept"][k]
+    assert abs(overall - mixed) < 1e-9
