@@ -50,7 +50,6 @@ __all__ = [
     "Params",
     "ReportParams",
     "STAGE_SECTIONS",
-    "StudyParams",
     "VaeParams",
     "flatten",
     "load_params",
@@ -255,51 +254,6 @@ class PlanningModelParams(Section):
         return _distinct_non_negative(value)
 
 
-class StudyParams(Section):
-    """One study: every variant × seed × combination of the grid's values, each run exactly
-    ``train-agent --set key=value …`` then its evaluation (``socnav-wm sweep``)."""
-
-    SECTION: ClassVar[str] = "studies.<name>"
-
-    variants: list[str] = Field(default_factory=lambda: list(VARIANT_NAMES), min_length=1)
-    """Agent variants of the grid."""
-    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2, 3, 4], min_length=1)
-    """Training seeds of the grid."""
-    grid: dict[str, list[Any]] = Field(default_factory=dict)
-    """Dotted ``params.yaml`` keys and the values each takes (empty: the shipped values)."""
-
-    @field_validator("variants")
-    @classmethod
-    def _known_variants(cls, value: list[str]) -> list[str]:
-        return _known_distinct_variants(value)
-
-    @field_validator("seeds")
-    @classmethod
-    def _distinct_seeds(cls, value: list[int]) -> list[int]:
-        return _distinct_non_negative(value)
-
-    @field_validator("grid")
-    @classmethod
-    def _known_keys(cls, value: dict[str, list[Any]]) -> dict[str, list[Any]]:
-        for key, values in value.items():
-            if key.split(".")[0] not in ("agent", "env"):
-                raise ValueError(f"{key!r}: a study varies agent.* or env.* keys only")
-            if not _key_known(key):
-                raise ValueError(_unknown_key(key))
-            if not values:
-                raise ValueError(f"{key!r}: expected at least one value")
-        return value
-
-
-def _default_studies() -> dict[str, StudyParams]:
-    return {
-        "horizon": StudyParams(
-            variants=["2stepahead", "2stepahead-maspm"], grid={"agent.horizon": [2, 4, 8, 16]}
-        ),
-        "seeds": StudyParams(),
-    }
-
-
 class Params(Section):
     """Everything ``params.yaml`` can hold; every section is optional."""
 
@@ -327,8 +281,6 @@ class Params(Section):
     """The planning world model (wm-mpc's); see pipeline/worldmodel/residual.py."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
-    studies: dict[str, StudyParams] = Field(default_factory=_default_studies)
-    """Named grids of agent runs outside the default pipeline (``socnav-wm sweep --study``)."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -410,16 +362,6 @@ def _child(node: Any, part: str) -> tuple[bool, Any]:
 
 def _is_model(node: Any) -> bool:
     return isinstance(node, type) and issubclass(node, BaseModel)
-
-
-def _key_known(dotted: str) -> bool:
-    """Whether a dotted key names a field of :class:`Params` (a free mapping takes any key)."""
-    node: Any = Params
-    for part in dotted.split("."):
-        known, node = _child(node, part)
-        if not known:
-            return False
-    return True
 
 
 def _unknown_key(dotted: str) -> str:
@@ -595,8 +537,6 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "evaluate_planner": ("env", "eval", "planning"),
     "train_planning_model": ("env", "planning_model"),
     "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
-    "study_horizon": ("env", "agent", "eval", "studies.horizon"),
-    "study_seeds": ("env", "agent", "eval", "studies.seeds"),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
 name is one key of a section). ``evaluate_baseline`` reads ``baselines.<its baseline>`` only:

@@ -311,7 +311,6 @@ def test_params_dict_is_plain_and_json_able() -> None:
         "planning",
         "planning_model",
         "report",
-        "studies",
     ]
     assert data["env"]["human_policy"] == "mixed"
     assert json.loads(json.dumps(data)) == data
@@ -611,26 +610,14 @@ def test_stage_sections_follow_dvc_yaml() -> None:
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        (
-            "studies: {h: {grid: {agent.horizn: [2]}}}",
-            "studies.h.grid: unknown key 'agent.horizn' (did you mean 'agent.horizon'?)",
-        ),
-        ("studies: {h: {grid: {vae.latent_dim: [8]}}}", "a study varies agent.* or env.* keys"),
-        ("studies: {h: {grid: {agent.horizon: []}}}", "expected at least one value"),
-        ("studies: {h: {variants: [nope]}}", "studies.h.variants: unknown 'nope'"),
-        ("studies: {h: {seeds: [1, 1]}}", "a seed is listed twice"),
         ("planning_model: {seeds: [-1]}", "planning_model.seeds: must be non-negative"),
+        ("planning_model: {seeds: [0, 0]}", "a seed is listed twice"),
         ("planning_model: {val_fraction: 1.0}", "planning_model.val_fraction"),
+        ("planning_model: {horizn: 4}", "unknown key 'planning_model.horizn'"),
     ],
 )
-def test_study_and_planning_model_errors(tmp_path: Path, text: str, expected: str) -> None:
+def test_planning_model_errors(tmp_path: Path, text: str, expected: str) -> None:
     path = tmp_path / "params.yaml"
     path.write_text(text + "\n")
     with pytest.raises(ConfigError, match=re.escape(expected)):
         load_params(path)
-
-
-def test_a_study_grid_key_reaches_any_depth_of_a_free_mapping(tmp_path: Path) -> None:
-    path = tmp_path / "params.yaml"
-    path.write_text("studies: {g: {grid: {agent.per_variant.maspm.gamma: [0.9, 0.99]}}}\n")
-    assert load_params(path).studies["g"].grid == {"agent.per_variant.maspm.gamma": [0.9, 0.99]}
