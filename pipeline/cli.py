@@ -474,6 +474,7 @@ def predict(
     actions."""
     params = _load(params_path, None, None)
     _set_threads(threads)
+    from pipeline.evaluation.rendering import PREDICTION_KS
     from pipeline.stages import predict as stage
     from pipeline.worldmodel.prediction import error_table
 
@@ -500,7 +501,7 @@ def predict(
         if change:
             rows = []
             for i, k in enumerate(errors["k"]):
-                if k not in (1, 4, 8, 12, 16):
+                if k not in PREDICTION_KS:
                     continue
                 row: dict[str, Any] = {"k": k, "new goal": change["changed_share"][i]}
                 for name, values in change["predictors"].items():
@@ -524,7 +525,7 @@ def predict(
                     versus["verdict"],
                     strict=True,
                 )  # fmt: skip
-                if k in (1, 4, 8, 12, 16)
+                if k in PREDICTION_KS
             ]
             _print_table(
                 rows,

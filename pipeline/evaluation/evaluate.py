@@ -534,8 +534,6 @@ def evaluate_method(
         from pipeline.planning.models import ConstantVelocityModel
         from pipeline.planning.mpc import Planner
 
-        if method != "cv-mpc":
-            raise NotImplementedError(f"planner {method!r} is not built yet")
         planning = planning or PlanningParams()
         settings["planning"] = planning.to_dict()
         seeds = (BASELINE_SEED,)

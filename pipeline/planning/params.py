@@ -11,11 +11,9 @@ from pydantic import AfterValidator, BeforeValidator, Field
 
 from pipeline.env.params import Section
 
-PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc")
+PLANNER_NAMES: tuple[str, ...] = ("cv-mpc",)
 """The planning methods: receding-horizon control over the paper's four actions with a model
-that predicts the goal and the humans: ``cv-mpc`` constant velocity, no learning; ``wm-mpc`` the
-planning world model (constant velocity plus a learned correction); ``vae-lstm-mpc`` the paper's
-VAE + LSTM; ``oracle-mpc`` the simulator itself, with draws of its own (the ceiling)."""
+that predicts the goal and the humans (``cv-mpc``: constant velocity, no learning)."""
 
 Continuation = Literal["goal", "stop", "forward"]
 CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")

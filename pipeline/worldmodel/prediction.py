@@ -217,11 +217,11 @@ def _versus_constant_velocity(
     for k in range(valid.shape[1]):
         rows = valid[:, k]
         humans = [float(e[rows, k, 1:].mean()) for e in per_seed]
-        differences = np.array([(e[rows, k, 1:] - cv[rows, k, 1:]).mean() for e in per_seed])
-        mean, low, high = _mean_ci(differences)
         if len(per_seed) == 1:  # one seed: the interval over episodes of its paired difference
-            paired = (per_seed[0][rows, k, 1:] - cv[rows, k, 1:]).mean(axis=-1)
-            mean, low, high = _mean_ci(paired)
+            mean, low, high = _mean_ci((per_seed[0][rows, k, 1:] - cv[rows, k, 1:]).mean(-1))
+        else:
+            differences = [(e[rows, k, 1:] - cv[rows, k, 1:]).mean() for e in per_seed]
+            mean, low, high = _mean_ci(np.array(differences))
         verdict = "better" if high < 0 else "worse" if low > 0 else "no different"
         if math.isnan(low):
             verdict = "better" if mean < 0 else "worse" if mean > 0 else "no different"

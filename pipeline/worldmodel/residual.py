@@ -38,9 +38,6 @@ from pipeline.env.params import EnvParams
 from pipeline.planning.models import ConstantVelocityModel, Rollout
 from pipeline.worldmodel.ego import human_velocities, positions
 
-PREDICTOR = "residual-cv"
-"""The planning model's name among the predictors."""
-
 
 def _rotate(x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
     """Vectors (..., 2) turned by −φ, where ``c, s = cos φ, sin φ`` (shape ``...``)."""
@@ -402,51 +399,6 @@ def load_residual(path: Any) -> ResidualDynamics:
     model = ResidualDynamics(data["num_humans"], data["hidden_dim"], data["dt"])
     model.load_state_dict(data["state_dict"])
     return model.eval()
-
-
-def compare_with_constant_velocity(
-    model: ResidualDynamics,
-    env_params: EnvParams,
-    *,
-    episodes: int,
-    scenario_seed: int,
-    warmup: int,
-    horizon: int,
-) -> list[dict[str, Any]]:
-    """Per k = 1…horizon, under the random policy on scenarios ``0..episodes−1`` of
-    ``scenario_seed``: the humans' mean error (m) of the model and of constant velocity, and
-    the paired difference (model − constant velocity) with its 95% t-interval over episodes."""
-    from pipeline.worldmodel.ego import predict_positions
-    from pipeline.worldmodel.prediction import _mean_ci, random_policy, record
-
-    rec = record(
-        env_params, random_policy(scenario_seed), scenario_seed, np.arange(episodes),
-        warmup + horizon,
-    )  # fmt: skip
-    truth = np.stack([positions(rec.obs[warmup + k]) for k in range(1, horizon + 1)], axis=1)
-    valid = np.logical_and.accumulate(rec.stepped[warmup - 1 : warmup + horizon], axis=0)[1:].T
-    start = (rec.obs[warmup - 1], rec.obs[warmup], rec.actions[warmup - 1])
-    future = rec.actions[warmup : warmup + horizon].T
-    cv = predict_positions("constant-velocity", *start, future, env_params)
-    ours = residual_positions(model, *start, future, env_params)
-    cv_error = np.linalg.norm(cv - truth, axis=-1)[..., 1:].mean(-1)  # (N, K)
-    our_error = np.linalg.norm(ours - truth, axis=-1)[..., 1:].mean(-1)
-    rows = []
-    for k in range(horizon):
-        n = valid[:, k]
-        difference, low, high = _mean_ci(our_error[n, k] - cv_error[n, k])
-        rows.append(
-            {
-                "k": k + 1,
-                "n": int(n.sum()),
-                f"{PREDICTOR} humans": float(our_error[n, k].mean()),
-                "constant-velocity humans": float(cv_error[n, k].mean()),
-                "difference": difference,
-                "difference_low": low,
-                "difference_high": high,
-            }
-        )
-    return rows
 
 
 def fit_residual(
