@@ -721,6 +721,17 @@ def render(
 
 
 # --------------------------------------------------------------------------- bench
+def _print_machine() -> None:
+    """The machine a benchmark ran on, printed under its table (as MLflow records it)."""
+    from pipeline.tracking import machine_tags
+
+    tags = machine_tags()
+    line = f"machine: {tags['machine.cpu']}, {tags['machine.cores']} cores"
+    if "machine.torch" in tags:
+        line += f", torch {tags['machine.torch']} ({tags.get('machine.torch_blas', 'unknown')})"
+    typer.echo(line)
+
+
 @bench_app.command("env")
 @friendly_errors
 def bench_env_command(
@@ -746,6 +757,7 @@ def bench_env_command(
         f"socnav-wm bench env ({where}, one thread, {seconds:g} CPU-s per row)",
         {"steps_per_cpu_s": ",.0f", "peak_mb": ".1f"},
     )
+    _print_machine()
 
 
 @bench_app.command("collect")
@@ -766,6 +778,7 @@ def bench_collect_command(
         f"socnav-wm bench collect ({where})",
         {"cpu_seconds": ".2f", "steps_per_cpu_s": ",.0f", "parquet_mb": ".1f"},
     )
+    _print_machine()
 
 
 @bench_app.command("train")
@@ -829,6 +842,7 @@ def bench_train_command(
             "updates_per_cpu_s": ",.0f",
         },
     )
+    _print_machine()
 
 
 @bench_app.command("contention")
@@ -863,6 +877,7 @@ def bench_contention_command(
             "wall_s_shared": ".1f",
         },
     )
+    _print_machine()
 
 
 def main() -> None:  # pragma: no cover - console entry point
