@@ -422,7 +422,8 @@ def report(
     no_tracking: NoTrackingOption = False,
 ) -> None:
     """Table, paired tests, Pareto set, figures and the paper's claims checked; the results
-    table also goes into the README's results block (stage `report`)."""
+    table also goes into the results blocks of README.md and docs/evaluation.md (stage
+    `report`)."""
     params = _load(params_path, overlays, overrides)
     from pipeline.stages import report as stage
 
