@@ -722,13 +722,16 @@ def render(
 
 
 # --------------------------------------------------------------------------- bench
-def _print_machine() -> None:
-    """The machine a benchmark ran on, printed under its table (as MLflow records it)."""
+def _print_machine(torch_build: bool = False) -> None:
+    """The machine a benchmark ran on, printed under its table (as MLflow records it), with the
+    torch build for the benchmarks that run torch."""
+    if torch_build:
+        import torch  # noqa: F401  (machine_tags describes torch once it is imported)
     from pipeline.tracking import machine_tags
 
     tags = machine_tags()
     line = f"machine: {tags['machine.cpu']}, {tags['machine.cores']} cores"
-    if "machine.torch" in tags:
+    if torch_build:
         line += f", torch {tags['machine.torch']} ({tags.get('machine.torch_blas', 'unknown')})"
     typer.echo(line)
 
@@ -843,7 +846,7 @@ def bench_train_command(
             "updates_per_cpu_s": ",.0f",
         },
     )
-    _print_machine()
+    _print_machine(torch_build=True)
 
 
 @bench_app.command("contention")
@@ -878,7 +881,7 @@ def bench_contention_command(
             "wall_s_shared": ".1f",
         },
     )
-    _print_machine()
+    _print_machine(torch_build=True)
 
 
 def main() -> None:  # pragma: no cover - console entry point
