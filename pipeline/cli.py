@@ -422,7 +422,8 @@ def report(
     no_tracking: NoTrackingOption = False,
 ) -> None:
     """Table, paired tests, Pareto set, figures and the paper's claims checked; the results
-    table also goes into the README's results block (stage `report`)."""
+    table also goes into the results blocks of README.md and docs/evaluation.md (stage
+    `report`)."""
     params = _load(params_path, overlays, overrides)
     from pipeline.stages import report as stage
 
@@ -721,6 +722,20 @@ def render(
 
 
 # --------------------------------------------------------------------------- bench
+def _print_machine(torch_build: bool = False) -> None:
+    """The machine a benchmark ran on, printed under its table (as MLflow records it), with the
+    torch build for the benchmarks that run torch."""
+    if torch_build:
+        import torch  # noqa: F401  (machine_tags describes torch once it is imported)
+    from pipeline.tracking import machine_tags
+
+    tags = machine_tags()
+    line = f"machine: {tags['machine.cpu']}, {tags['machine.cores']} cores"
+    if torch_build:
+        line += f", torch {tags['machine.torch']} ({tags.get('machine.torch_blas', 'unknown')})"
+    typer.echo(line)
+
+
 @bench_app.command("env")
 @friendly_errors
 def bench_env_command(
@@ -746,6 +761,7 @@ def bench_env_command(
         f"socnav-wm bench env ({where}, one thread, {seconds:g} CPU-s per row)",
         {"steps_per_cpu_s": ",.0f", "peak_mb": ".1f"},
     )
+    _print_machine()
 
 
 @bench_app.command("collect")
@@ -766,6 +782,7 @@ def bench_collect_command(
         f"socnav-wm bench collect ({where})",
         {"cpu_seconds": ".2f", "steps_per_cpu_s": ",.0f", "parquet_mb": ".1f"},
     )
+    _print_machine()
 
 
 @bench_app.command("train")
@@ -829,6 +846,7 @@ def bench_train_command(
             "updates_per_cpu_s": ",.0f",
         },
     )
+    _print_machine(torch_build=True)
 
 
 @bench_app.command("contention")
@@ -863,6 +881,7 @@ def bench_contention_command(
             "wall_s_shared": ".1f",
         },
     )
+    _print_machine(torch_build=True)
 
 
 def main() -> None:  # pragma: no cover - console entry point

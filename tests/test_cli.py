@@ -66,6 +66,9 @@ def test_bench_env_prints_a_table() -> None:
     )
     assert result.exit_code == 0, result.output
     assert "steps_per_cpu_s" in result.output and "gym.make_vec" in result.output
+    # The machine it ran on, as MLflow records it, under the table.
+    machine = result.output.rstrip().splitlines()[-1]
+    assert machine.startswith("machine: ") and machine.endswith(" cores")
 
 
 def test_bench_env_rejects_an_unknown_human_policy() -> None:
@@ -93,6 +96,7 @@ def test_bench_train_reads_the_params_file_and_overrides(tmp_path: Path) -> None
     assert result.exit_code == 0, result.output
     title = " ".join(result.output.split())
     assert "decode_latents True" in title and "per CPU-second" in title
+    assert "torch " in result.output.rstrip().splitlines()[-1]  # the machine line
     row = next(line for line in result.output.splitlines() if "maspm" in line)
     cells = [cell.strip() for cell in row.split("│")[1:-1]]
     # maspm with decoded latents: z and four predictions, 23 values each; 4 envs, batch 16.

@@ -141,6 +141,7 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
     readme = (repo / "README.md").read_text()
     assert "on the same 4 test scenarios" in readme and "| `orca` |" in readme
     assert readme.endswith((ROOT / "README.md").read_text().split("<!-- /socnav-wm:results -->")[1])
+    assert "on the same 4 test scenarios" in (repo / "docs/evaluation.md").read_text()
 
     # An edit of the reward makes every stage that can execute it stale: the data, every
     # training, every evaluation, the baselines' included (their import closure has it).

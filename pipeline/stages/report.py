@@ -8,6 +8,9 @@ from pipeline.config import Params
 from pipeline.evaluation.report import build_report
 from pipeline.stages.common import open_stage
 
+RESULTS_DOCUMENTS = (Path("README.md"), Path("docs/evaluation.md"))
+"""The markdown files whose ``results`` block the stage fills (outputs of the DVC stage)."""
+
 
 def run(
     params: Params,
@@ -21,8 +24,8 @@ def run(
     tracking: bool = True,
 ) -> str:
     r = params.report
-    if documents is None:  # the README's results block, when run where there is a README
-        documents = tuple(p for p in (Path("README.md"),) if p.is_file())
+    if documents is None:  # the results blocks of the README and the docs, where they exist
+        documents = tuple(p for p in RESULTS_DOCUMENTS if p.is_file())
     with open_stage("report", "report", params, tracking=tracking) as run:
         result = build_report(
             eval_dir,

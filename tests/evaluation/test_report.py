@@ -233,6 +233,39 @@ def test_report_with_only_baselines_says_what_is_missing(baseline_results, tmp_p
     assert json.loads((tmp_path / "report.json").read_text())["comparisons"] == {}
 
 
+def test_the_report_stage_fills_the_results_blocks_of_the_readme_and_the_docs(
+    baseline_results, tmp_path, monkeypatch
+):
+    """Run where the README and docs/evaluation.md are (as `dvc repro` does), the stage writes
+    the results table into both blocks and leaves the rest of each file as it was."""
+    from pipeline.config import Params
+    from pipeline.stages import report as stage
+
+    root = Path(__file__).resolve().parents[2]
+    end = "<!-- /socnav-wm:results -->"
+    for document in stage.RESULTS_DOCUMENTS:
+        (tmp_path / document).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / document).write_text((root / document).read_text())
+    for result in baseline_results.values():
+        write_evaluation_files(result, tmp_path / "eval", tmp_path / "m")
+    monkeypatch.chdir(tmp_path)
+    params = Params.model_validate(
+        {
+            "env": TEST_ENV.to_dict(),
+            "eval": {"scenario_seed": SCENARIO_SEED},
+            "report": {"gif_scenarios": []},
+        }
+    )
+    stage.run(
+        params, eval_dir=Path("eval"), training_dir=Path("none"), out_dir=Path("reports"),
+        metrics=Path("report.json"), prediction=None, tracking=False,
+    )  # fmt: skip
+    for document in stage.RESULTS_DOCUMENTS:
+        text = (tmp_path / document).read_text()
+        assert f"on the same {EPISODES} test scenarios" in text and "| `orca` |" in text, document
+        assert text.split(end)[1] == (root / document).read_text().split(end)[1], document
+
+
 def test_report_without_any_evaluation(tmp_path):
     stale = tmp_path / "r" / "figures" / "histograms.png"
     stale.parent.mkdir(parents=True)
