@@ -848,6 +848,60 @@ def bench_train_command(
     )
 
 
+@bench_app.command("plan")
+@friendly_errors
+def bench_plan_command(
+    method: Annotated[
+        list[str] | None,
+        typer.Option(help="Planners (repeatable) [default: every planner whose models exist]."),
+    ] = None,
+    batch: Annotated[
+        list[int] | None, typer.Option(help="Episodes planned together (repeatable).", min=1)
+    ] = None,
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per row (CPU-s).")] = 2.0,
+) -> None:
+    """Decisions per CPU-second of each planner, one core and one torch thread, at the shipped
+    batch (`eval.batch_size`) and at 1, 64 and 512 episodes planned together."""
+    from pipeline.bench import PLAN_BATCH_SIZES, bench_plan, one_core
+    from pipeline.planning.methods import model_files
+    from pipeline.planning.params import PLANNER_NAMES
+
+    config = _load(params_path, None, overrides) if params_path.exists() else None
+    if config is None:
+        from pipeline.config import Params
+
+        config = Params()
+    for name in method or ():
+        if name not in PLANNER_NAMES:
+            raise UserError(
+                f"--method: unknown {name!r}; expected one of {', '.join(PLANNER_NAMES)}"
+            )
+    methods = list(method or PLANNER_NAMES)
+    if not method:  # by default, skip the learned planners whose models are not there
+        for name in list(methods):
+            try:
+                model_files(name)
+            except FileNotFoundError as exc:
+                typer.echo(f"skipped {name}: {exc}")
+                methods.remove(name)
+    sizes = tuple(batch or sorted({config.eval.batch_size, *PLAN_BATCH_SIZES}))
+    _set_threads(1)
+    with one_core() as where:
+        rows = bench_plan(
+            tuple(methods), sizes, env_params=config.env, planning=config.planning,
+            seconds=seconds,
+        )  # fmt: skip
+    _print_table(
+        rows,
+        f"socnav-wm bench plan ({where}, one thread, {seconds:g} CPU-s per row; "
+        f"horizon {config.planning.horizon}, {4**config.planning.prefix_length} prefixes x "
+        f"{len(config.planning.continuations)} continuations)",
+        {"decisions_per_cpu_s": ",.1f", "cpu_ms_per_decision": ".2f"},
+    )
+
+
 @bench_app.command("contention")
 @friendly_errors
 def bench_contention_command(
