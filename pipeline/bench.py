@@ -357,3 +357,64 @@ def bench_contention(
                 }
             )
     return rows
+
+
+PLAN_BATCH_SIZES = (1, 64, 512)
+
+
+def bench_plan(
+    methods: tuple[str, ...],
+    batch_sizes: tuple[int, ...] = PLAN_BATCH_SIZES,
+    *,
+    env_params: EnvParams,
+    planning: Any,
+    files: dict[str, dict[str, Any]] | None = None,
+    seconds: float = 2.0,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """Decisions per CPU-second of each planner with ``n`` episodes planned together.
+
+    Each call of a planner's policy plans one step of every episode of the batch; an episode
+    that ends is replaced by the next scenario of ``seed``, so the batch stays full. The first
+    calls (compilation, first allocations) are not timed. ``cpu_ms_per_decision`` is the
+    process's CPU time per decision (one core when torch has one thread).
+
+    Args:
+        methods: planner names (:data:`pipeline.planning.params.PLANNER_NAMES`).
+        batch_sizes: the ``n`` of each row.
+        env_params: the scenarios' parameters.
+        planning: the ``planning`` section.
+        files: each learned planner's model files by role (default: the pipeline's paths).
+    """
+    from pipeline.env.core import Simulator
+    from pipeline.planning.methods import model_files, planner_policy
+
+    rows = []
+    for method in methods:
+        chosen = model_files(method, (files or {}).get(method))
+        for n in batch_sizes:
+            sim = Simulator(n, env_params)
+            obs, _ = sim.reset(seed=seed)
+            policy, reads_simulator = planner_policy(method, env_params, planning, chosen)
+            state = {"obs": obs}
+
+            def decide(sim=sim, policy=policy, reads_simulator=reads_simulator, state=state, n=n):
+                actions = policy(sim if reads_simulator else state["obs"])
+                state["obs"] = sim.step(actions).obs
+                if sim.state.done.any():
+                    sim.reset_envs(sim.state.done)
+                    state["obs"] = sim.observation
+                return n
+
+            for _ in range(2):  # warm-up
+                decide()
+            rate = _rate(decide, seconds)
+            rows.append(
+                {
+                    "planner": method,
+                    "envs": n,
+                    "decisions_per_cpu_s": rate,
+                    "cpu_ms_per_decision": 1000.0 / rate,
+                }
+            )
+    return rows

@@ -365,7 +365,7 @@ def train_agent_command(
 @app.command()
 @friendly_errors
 def evaluate(
-    method: Annotated[str, typer.Option(help="An agent variant, orca or sfm.")],
+    method: Annotated[str, typer.Option(help="An agent variant, a baseline or a planner.")],
     params_path: ParamsOption = Path("params.yaml"),
     overrides: SetOption = None,
     overlays: OverlayOption = None,
@@ -376,13 +376,25 @@ def evaluate(
         Path, typer.Option(help="Writes {method}.parquet and {method}-trajectories.parquet.")
     ] = Path("data/eval"),
     metrics_dir: Annotated[Path, typer.Option(help="Writes {method}.json.")] = Path("metrics/eval"),
+    planning_model: Annotated[
+        Path | None,
+        typer.Option(help="wm-mpc's planning model [default: models/planning/seed-0.pt]."),
+    ] = None,
+    vae: Annotated[
+        Path | None, typer.Option(help="vae-lstm-mpc's VAE [default: models/vae.pt].")
+    ] = None,
+    lstm: Annotated[
+        Path | None, typer.Option(help="vae-lstm-mpc's LSTM [default: models/lstm.pt].")
+    ] = None,
     device: DeviceOption = None,
     threads: ThreadsOption = None,
     no_tracking: NoTrackingOption = False,
     quiet: QuietOption = False,
 ) -> None:
-    """Run one method greedily on the test scenarios, every training seed of an agent
-    (`experiment.seeds`) (stage `evaluate`)."""
+    """Run one method greedily on the test scenarios: every training seed of an agent
+    (`experiment.seeds`), a baseline, or a planner (cv-mpc, wm-mpc, vae-lstm-mpc, oracle-mpc)
+    (stages `evaluate`, `evaluate_baseline`, `evaluate_planner`, `evaluate_wm_mpc`,
+    `evaluate_vae_lstm_mpc`)."""
     from pipeline.agents.params import METHOD_NAMES
 
     if method not in METHOD_NAMES:
@@ -397,6 +409,11 @@ def evaluate(
         agents_dir=agents_dir,
         out_dir=out_dir,
         metrics_dir=metrics_dir,
+        planner_files={
+            role: path
+            for role, path in (("planning_model", planning_model), ("vae", vae), ("lstm", lstm))
+            if path is not None
+        },
         tracking=not no_tracking,
         quiet=quiet,
     )
@@ -652,7 +669,8 @@ def render(
     policy: Annotated[
         str,
         typer.Option(
-            help="Robot policy: random, orca, sfm, cv-mpc, a variant (its seed-0 agent in "
+            help="Robot policy: random, orca, sfm, a planner (cv-mpc, wm-mpc, vae-lstm-mpc, "
+            "oracle-mpc: their models at the pipeline's paths), a variant (its seed-0 agent in "
             "--agents-dir) or the path of an agent file."
         ),
     ] = "random",
@@ -699,11 +717,10 @@ def render(
         act = lambda sim: baseline.act(sim.state, sim.params)  # noqa: E731
         runs = run_episodes(params, act, seed, ids, reads_simulator=True)
     elif policy in PLANNER_NAMES:
-        from pipeline.planning.models import ConstantVelocityModel
-        from pipeline.planning.mpc import Planner
+        from pipeline.planning.methods import planner_policy
 
-        planner = Planner(ConstantVelocityModel(params), config.planning, params)
-        runs = run_episodes(params, planner.policy(), seed, ids)
+        act, reads_simulator = planner_policy(policy, params, config.planning)
+        runs = run_episodes(params, act, seed, ids, reads_simulator=reads_simulator)
     else:
         from pipeline.agents.agent_file import greedy_episodes, load_agent
 
@@ -847,6 +864,60 @@ def bench_train_command(
         },
     )
     _print_machine(torch_build=True)
+
+
+@bench_app.command("plan")
+@friendly_errors
+def bench_plan_command(
+    method: Annotated[
+        list[str] | None,
+        typer.Option(help="Planners (repeatable) [default: every planner whose models exist]."),
+    ] = None,
+    batch: Annotated[
+        list[int] | None, typer.Option(help="Episodes planned together (repeatable).", min=1)
+    ] = None,
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per row (CPU-s).")] = 2.0,
+) -> None:
+    """Decisions per CPU-second of each planner, one core and one torch thread, at the shipped
+    batch (`eval.batch_size`) and at 1, 64 and 512 episodes planned together."""
+    from pipeline.bench import PLAN_BATCH_SIZES, bench_plan, one_core
+    from pipeline.planning.methods import model_files
+    from pipeline.planning.params import PLANNER_NAMES
+
+    config = _load(params_path, None, overrides) if params_path.exists() else None
+    if config is None:
+        from pipeline.config import Params
+
+        config = Params()
+    for name in method or ():
+        if name not in PLANNER_NAMES:
+            raise UserError(
+                f"--method: unknown {name!r}; expected one of {', '.join(PLANNER_NAMES)}"
+            )
+    methods = list(method or PLANNER_NAMES)
+    if not method:  # by default, skip the learned planners whose models are not there
+        for name in list(methods):
+            try:
+                model_files(name)
+            except FileNotFoundError as exc:
+                typer.echo(f"skipped {name}: {exc}")
+                methods.remove(name)
+    sizes = tuple(batch or sorted({config.eval.batch_size, *PLAN_BATCH_SIZES}))
+    _set_threads(1)
+    with one_core() as where:
+        rows = bench_plan(
+            tuple(methods), sizes, env_params=config.env, planning=config.planning,
+            seconds=seconds,
+        )  # fmt: skip
+    _print_table(
+        rows,
+        f"socnav-wm bench plan ({where}, one thread, {seconds:g} CPU-s per row; "
+        f"horizon {config.planning.horizon}, {4**config.planning.prefix_length} prefixes x "
+        f"{len(config.planning.continuations)} continuations)",
+        {"decisions_per_cpu_s": ",.1f", "cpu_ms_per_decision": ".2f"},
+    )
 
 
 @bench_app.command("contention")

@@ -480,6 +480,7 @@ def evaluate_method(
     agent_paths: Mapping[int, str | Path] | None = None,
     baseline_overrides: Mapping[str, Any] | None = None,
     planning: PlanningParams | None = None,
+    planner_files: Mapping[str, str | Path] | None = None,
     device: str = "cpu",
     batch_size: int = 500,
     quiet: bool = True,
@@ -497,6 +498,8 @@ def evaluate_method(
             (``params.yaml``'s ``baselines.<name>``). Must be empty for an agent.
         planning: for a planner, its parameters (``params.yaml``'s ``planning``; default: the
             code's defaults). Must be None for another method.
+        planner_files: for a planner, its model files by role, replacing the pipeline's
+            (:data:`pipeline.planning.methods.MODEL_FILES`).
         device: where the agents' networks run (``cpu``, ``cuda``, ``auto``).
         batch_size: scenarios simulated together (all of a seed's scenarios in one batch by
             default); the results do not depend on it.
@@ -526,22 +529,25 @@ def evaluate_method(
         episode_tables.append(episodes_table(method, seed, runs, env_params))
         trajectory_tables.append(trajectories_table(method, seed, runs, env_params.num_humans))
 
-    if planning is not None and method not in PLANNER_METHODS:
+    if (planning is not None or planner_files) and method not in PLANNER_METHODS:
         raise ValueError(f"method {method!r} is not a planner: planning parameters do not apply")
     if method in PLANNER_METHODS:
         if agent_paths or baseline_overrides:
             raise ValueError(f"method {method!r} is a planner: it takes no agent files")
-        from pipeline.planning.models import ConstantVelocityModel
-        from pipeline.planning.mpc import Planner
+        from pipeline.planning.methods import model_files, planner_policy
 
         planning = planning or PlanningParams()
+        files = model_files(method, planner_files)
         settings["planning"] = planning.to_dict()
+        settings["model_files"] = {role: str(path) for role, path in files.items()}
         seeds = (BASELINE_SEED,)
         runs = []
         with progress(episodes, f"evaluate {method}", quiet=quiet, unit="episodes") as bar:
             for chunk in _chunks(ids, batch_size):
-                planner = Planner(ConstantVelocityModel(env_params), planning, env_params)
-                runs += run_episodes(env_params, planner.policy(), scenario_seed, chunk)
+                policy, reads_simulator = planner_policy(method, env_params, planning, files)
+                runs += run_episodes(
+                    env_params, policy, scenario_seed, chunk, reads_simulator=reads_simulator
+                )
                 bar.advance(chunk.size)
         record(BASELINE_SEED, runs)
     elif method in BASELINE_METHODS:

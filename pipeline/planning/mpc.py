@@ -47,6 +47,54 @@ def towards_goal(goal: np.ndarray, env_params: EnvParams) -> np.ndarray:
     return np.where(bearing > half_turn, LEFT, np.where(bearing < -half_turn, RIGHT, FORWARD))
 
 
+def candidate_actions(
+    prefix_table: np.ndarray,
+    continuations: tuple[str, ...],
+    k: int,
+    goal: np.ndarray,
+    env_params: EnvParams,
+) -> np.ndarray:
+    """Step ``k``'s action of every future (B,), futures in candidate order repeated per
+    episode: the prefix's while ``k`` is within it, then the continuation's (``goal`` from the
+    futures' robot-frame goals (B, 2))."""
+    conts = len(continuations)
+    batch = len(goal)
+    candidates = len(prefix_table) * conts
+    rows_of = np.arange(batch) % candidates
+    if k < prefix_table.shape[1]:
+        return prefix_table[rows_of // conts, k]
+    continuation_of = rows_of % conts
+    actions = np.empty(batch, dtype=np.int64)
+    for c, name in enumerate(continuations):
+        rows = continuation_of == c
+        if name == "goal":
+            actions[rows] = towards_goal(goal[rows], env_params)
+        else:
+            actions[rows] = {"stop": STOP, "forward": FORWARD}[name]
+    return actions
+
+
+def step_gain(
+    params: PlanningParams,
+    env_params: EnvParams,
+    progress: np.ndarray,
+    centre: np.ndarray,
+    collided: np.ndarray,
+    reached: np.ndarray,
+) -> np.ndarray:
+    """One predicted step's term of the cost (the module docstring's step 3), undiscounted:
+    ``progress`` (m towards the goal), ``centre`` (distance to the nearest human's centre, m),
+    ``collided`` and ``reached`` (bool), all (B,)."""
+    p, e = params, env_params
+    uncomfortable = centre - e.robot_radius - e.human_radius < e.discomfort_distance
+    return (
+        p.progress_weight * progress
+        - p.discomfort_cost * uncomfortable
+        - p.collision_cost * collided
+        + p.goal_reward * reached
+    )
+
+
 class Planner:
     """The planner of the module docstring, with ``model`` as its predictor.
 
@@ -67,43 +115,28 @@ class Planner:
         prefix ``p`` followed by continuation ``c``."""
         p, e = self.params, self.env_params
         num_episodes = len(goal_now)
-        conts = len(p.continuations)
         s = self.num_candidates
         rollout = self.model.rollout(s)
         batch = num_episodes * s
-        prefix_of = np.tile(np.repeat(np.arange(len(self.prefixes)), conts), num_episodes)
-        continuation_of = np.tile(np.arange(conts), len(self.prefixes) * num_episodes)
-        fixed = {"stop": STOP, "forward": FORWARD}
         score = np.zeros(batch)
         alive = np.ones(batch, dtype=bool)
         goal = np.repeat(np.asarray(goal_now, dtype=np.float64), s, axis=0)
         goal_distance = np.hypot(goal[:, 0], goal[:, 1])
         contact = e.robot_radius + e.human_radius + p.safety_margin
         for k in range(p.horizon):
-            if k < p.prefix_length:
-                actions = self.prefixes[prefix_of, k]
-            else:
-                actions = np.empty(batch, dtype=np.int64)
-                for c, name in enumerate(p.continuations):
-                    rows = continuation_of == c
-                    if name == "goal":
-                        actions[rows] = towards_goal(goal[rows], e)
-                    else:
-                        actions[rows] = fixed[name]
+            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e)
             predicted = rollout.step(actions)
             goal = predicted[:, 0]
             new_goal_distance = np.hypot(goal[:, 0], goal[:, 1])
             centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
             collided = centre < contact
             reached = ~collided & (new_goal_distance < e.success_distance)
-            uncomfortable = centre - e.robot_radius - e.human_radius < e.discomfort_distance
-            gain = (
-                p.progress_weight * (goal_distance - new_goal_distance)
-                - p.discomfort_cost * uncomfortable
-                - p.collision_cost * collided
-                + p.goal_reward * reached
+            score += np.where(
+                alive,
+                p.discount**k
+                * step_gain(p, e, goal_distance - new_goal_distance, centre, collided, reached),
+                0.0,
             )
-            score += np.where(alive, p.discount**k * gain, 0.0)
             alive &= ~(collided | reached)
             goal_distance = new_goal_distance
         return score.reshape(num_episodes, s)

@@ -11,9 +11,11 @@ from pydantic import AfterValidator, BeforeValidator, Field
 
 from pipeline.env.params import Section
 
-PLANNER_NAMES: tuple[str, ...] = ("cv-mpc",)
-"""The planning methods: receding-horizon control over the paper's four actions with a model
-that predicts the goal and the humans (``cv-mpc``: constant velocity, no learning)."""
+PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc")
+"""The planning methods: receding-horizon control over the paper's four actions, each with its
+model of the goal and the humans: ``cv-mpc`` constant velocity (no learning), ``wm-mpc`` the
+planning world model (``train_planning_model``'s seed 0), ``vae-lstm-mpc`` the paper's VAE +
+LSTM, ``oracle-mpc`` the simulator itself (the ceiling of the four actions)."""
 
 Continuation = Literal["goal", "stop", "forward"]
 CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")
@@ -70,3 +72,8 @@ class PlanningParams(Section):
     """Weight of each step's progress towards the goal (metres)."""
     safety_margin: float = _finite(0.0, ge=0)
     """Added to the radii when testing a predicted contact (m)."""
+    oracle_seed: int = Field(4_000_037, ge=0)
+    """``oracle-mpc``: the seed of its clones' random draws (SFM noticing the robot, the humans'
+    new goals), not the episode's: it knows the humans' rules, not their future coin flips."""
+    oracle_clairvoyant: bool = False
+    """``oracle-mpc``: the clones reuse the episode's own draws instead (a clairvoyant ceiling)."""

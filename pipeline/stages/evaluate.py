@@ -1,5 +1,6 @@
-"""Stages ``evaluate``, ``evaluate_baseline`` and ``evaluate_planner``: one method, greedily, on
-the test scenarios (every training seed of an agent, ``experiment.seeds``)."""
+"""Stages ``evaluate``, ``evaluate_baseline`` and the planners' (``evaluate_planner``,
+``evaluate_wm_mpc``, ``evaluate_vae_lstm_mpc``): one method, greedily, on the test scenarios
+(every training seed of an agent, ``experiment.seeds``)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ def run(
     agents_dir: Path = Path("models/agents"),
     out_dir: Path = Path("data/eval"),
     metrics_dir: Path = Path("metrics/eval"),
+    planner_files: dict[str, Path] | None = None,
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
@@ -41,6 +43,9 @@ def run(
     episodes_path = out_dir / f"{method}.parquet"
     trajectories_path = out_dir / f"{method}-trajectories.parquet"
     metrics_path = metrics_dir / f"{method}.json"
+    if planner_files and method not in PLANNER_METHODS:
+        roles = ", ".join(f"--{role.replace('_', '-')}" for role in planner_files)
+        raise ValueError(f"{roles}: only for a planner, not {method!r}")
     check_writable(episodes_path, trajectories_path, metrics_path)
     with open_stage(stage, f"evaluate/{method}", params, tracking=tracking) as run:
         agent_paths = None
@@ -63,6 +68,7 @@ def run(
             agent_paths=agent_paths,
             baseline_overrides=overrides_of,
             planning=params.planning if method in PLANNER_METHODS else None,
+            planner_files=planner_files,
             device=params.eval.device,
             batch_size=params.eval.batch_size,
             quiet=quiet,

@@ -1,0 +1,259 @@
+"""The planners beyond cv-mpc: oracle-mpc (the simulator cloned), wm-mpc and vae-lstm-mpc."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import torch
+
+from pipeline.config import ConfigError, load_params
+from pipeline.env.core import Simulator
+from pipeline.env.observation import observe
+from pipeline.env.params import EnvParams
+from pipeline.env.state import COLLISION_NONE
+from pipeline.evaluation.evaluate import BASELINE_SEED, evaluate_method
+from pipeline.planning.methods import model_files, planner_policy
+from pipeline.planning.models import ConstantVelocityModel
+from pipeline.planning.mpc import Planner, step_gain
+from pipeline.planning.oracle import OraclePlanner, clone_simulator
+from pipeline.planning.params import PlanningParams
+from pipeline.planning.vae_lstm import VaeLstmModel
+from pipeline.worldmodel.lstm import LatentLSTM
+from pipeline.worldmodel.prediction import model_positions, random_policy, record
+from pipeline.worldmodel.residual import ResidualDynamics, ResidualTrainResult, save_residual
+from pipeline.worldmodel.training import save_lstm, save_vae
+from pipeline.worldmodel.vae import VAE
+
+ENV = EnvParams()
+
+
+def states_equal(a: Simulator, b: Simulator) -> bool:
+    return all(np.array_equal(getattr(a.state, k), getattr(b.state, k)) for k in vars(a.state))
+
+
+def test_a_clone_steps_exactly_like_the_original() -> None:
+    sim = Simulator(6, ENV)
+    sim.reset(seed=11)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        sim.step(rng.integers(0, 4, 6))
+    clone = clone_simulator(sim)
+    assert states_equal(sim, clone)
+    for _ in range(40):
+        actions = rng.integers(0, 4, 6)
+        ours, theirs = sim.step(actions), clone.step(actions)
+        np.testing.assert_array_equal(ours.obs, theirs.obs)
+        np.testing.assert_array_equal(ours.reward, theirs.reward)
+    assert states_equal(sim, clone)
+
+
+def test_clones_repeat_each_episode_in_a_row_and_can_pick_slots() -> None:
+    sim = Simulator(3, ENV)
+    sim.reset(seed=2)
+    clone = clone_simulator(sim, repeats=4, envs=np.array([2, 0]))
+    assert clone.num_envs == 8
+    assert clone.state.scenario_id.tolist() == [2] * 4 + [0] * 4
+    np.testing.assert_array_equal(clone.state.human_xy[4], sim.state.human_xy[0])
+    with pytest.raises(ValueError, match="repeats"):
+        clone_simulator(sim, repeats=0)
+
+
+def test_the_oracle_draws_its_own_random_numbers() -> None:
+    # SFM humans notice the robot at random, and a human at its goal draws a new one: under
+    # another seed a clone's future differs from the episode's, under the same seed it does not.
+    env = ENV.replace(human_policy="sfm")
+    sim = Simulator(20, env)
+    sim.reset(seed=5)
+    same, other = clone_simulator(sim), clone_simulator(sim, seed=123)
+    for _ in range(60):
+        actions = np.zeros(20, dtype=np.int64)
+        for s in (sim, same, other):
+            s.step(actions)
+    assert states_equal(sim, same)
+    assert not np.array_equal(sim.state.human_xy, other.state.human_xy)
+
+
+def one_human_ahead(env: EnvParams) -> Simulator:
+    """A room with the robot at (−1.2, 0) facing its goal at (1.2, 0), a human standing at the
+    origin on the straight path, and the two others standing in far corners."""
+    sim = Simulator(1, env)
+    sim.reset(seed=0)
+    s = sim.state
+    s.robot_xy[0], s.start_xy[0], s.robot_theta[0] = (-1.2, 0.0), (-1.2, 0.0), 0.0
+    s.goal_xy[0] = (1.2, 0.0)
+    s.human_xy[0] = [(0.0, 0.0), (3.5, 3.5), (-3.5, -3.5)][: env.num_humans]
+    s.human_goal[0] = s.human_xy[0]
+    s.human_speed[0] = 0.0
+    return sim
+
+
+def observation(sim: Simulator) -> np.ndarray:
+    s = sim.state
+    out = np.zeros((sim.num_envs, sim.obs_dim), dtype=np.float32)
+    observe(
+        s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, s.goal_xy, s.human_xy,
+        s.human_heading, s.human_speed, sim.params.human_radius, np.arange(sim.num_envs), out,
+    )  # fmt: skip
+    return out
+
+
+@pytest.mark.parametrize("method", ["oracle-mpc", "cv-mpc"])
+def test_both_planners_go_around_a_human_on_the_straight_path(method: str) -> None:
+    env = ENV.replace(human_policy="orca", human_max_speed=1e-6)  # the humans stand
+    sim = one_human_ahead(env)
+    policy, reads_simulator = planner_policy(method, env, PlanningParams(), {})
+    obs = observation(sim)
+    nearest, sideways = np.inf, 0.0
+    while not sim.state.done[0]:
+        result = sim.step(policy(sim if reads_simulator else obs))
+        obs = result.obs
+        nearest = min(nearest, float(np.hypot(*sim.state.robot_xy[0])))
+        sideways = max(sideways, abs(float(sim.state.robot_xy[0, 1])))
+    assert result.info["success"][0]
+    assert nearest > env.robot_radius + env.human_radius
+    assert sideways > 0.3  # it left the straight line
+
+
+def brute_force_best(sim: Simulator, params: PlanningParams, env: EnvParams) -> int:
+    """The first action of the best of every action sequence of ``params.horizon`` steps,
+    each scored on its own clone (under the oracle's seed), the first best in table order."""
+    best, best_score = -1, -np.inf
+    for sequence in itertools.product(range(4), repeat=params.horizon):
+        clone = clone_simulator(sim, seed=params.oracle_seed)
+        score, distance = 0.0, float(np.hypot(*(clone.state.goal_xy - clone.state.robot_xy)[0]))
+        for k, action in enumerate(sequence):
+            result = clone.step(np.array([action]))
+            new = float(np.hypot(*(clone.state.goal_xy - clone.state.robot_xy)[0]))
+            centre = np.hypot(*(clone.state.human_xy[0] - clone.state.robot_xy[0]).T).min()
+            collided = result.info["collision"][0] != COLLISION_NONE
+            reached = bool(result.info["success"][0])
+            gain = step_gain(
+                params, env, np.array([distance - new]), np.array([centre]),
+                np.array([collided]), np.array([reached]),
+            )[0]  # fmt: skip
+            score += params.discount**k * gain
+            distance = new
+            if clone.state.done[0]:
+                break
+        if score > best_score:
+            best, best_score = sequence[0], score
+    return best
+
+
+@pytest.mark.parametrize("scenario", [0, 1, 2, 3])
+def test_the_oracle_chooses_what_a_brute_force_search_chooses(scenario: int) -> None:
+    params = PlanningParams(horizon=3, prefix_length=3, discomfort_cost=0.5)
+    sim = Simulator(1, ENV)
+    sim.reset(seed=9, scenario_ids=np.array([scenario]))
+    for _ in range(3):
+        sim.step(np.array([1]))
+    chosen = OraclePlanner(params, ENV).act(sim)[0]
+    assert chosen == brute_force_best(sim, params, ENV)
+
+
+def test_the_oracle_counts_a_wall_contact_as_a_collision() -> None:
+    env = ENV.replace(human_policy="orca", human_max_speed=1e-6)
+    sim = one_human_ahead(env)
+    half = env.wall_half_size - env.robot_radius
+    sim.state.robot_xy[0] = (half - 0.1, 0.0)  # facing the wall, 0.1 m from touching it
+    sim.state.goal_xy[0] = (half - 0.1, -2.0)
+    params = PlanningParams(horizon=1, prefix_length=1, progress_weight=0.0, discomfort_cost=0.0)
+    scores = OraclePlanner(params, env).scores(sim, np.array([0])).reshape(4, -1)[:, 0]
+    assert scores[1] == -params.collision_cost  # forward hits the wall
+    assert np.all(scores[[0, 2, 3]] == 0.0)
+
+
+def test_oracle_evaluation_is_one_run_with_its_seed_recorded() -> None:
+    params = PlanningParams(horizon=3, prefix_length=1)
+    result = evaluate_method(
+        "oracle-mpc", env_params=ENV, scenario_seed=3, episodes=2, planning=params
+    )
+    assert result.training_seeds == (BASELINE_SEED,)
+    assert result.settings["planning"]["oracle_seed"] == params.oracle_seed
+    assert result.settings["model_files"] == {}
+
+
+def tiny_world_model(tmp_path) -> tuple[VAE, LatentLSTM]:
+    torch.manual_seed(0)
+    vae, lstm = VAE(23, 16, 4), LatentLSTM(4, 4, 8)
+    rng = np.random.default_rng(0)
+    vae.fit_normalization(rng.normal(size=(64, 23)))
+    save_vae(tmp_path / "vae.pt", vae)
+    save_lstm(tmp_path / "lstm.pt", lstm)
+    return vae, lstm
+
+
+def test_the_vae_lstm_model_imagines_what_the_predict_stage_measures(tmp_path) -> None:
+    vae, lstm = tiny_world_model(tmp_path)
+    recording = record(ENV, random_policy(1), 4, np.arange(5), 8)
+    _, expected = model_positions(vae, lstm, recording, warmup=3, horizon=4)
+    model = VaeLstmModel(vae, lstm)
+    model.reset(recording.obs[0])
+    for t in range(3):
+        model.observe(recording.obs[t + 1], recording.actions[t])
+    rollout = model.rollout(2)  # two copies of each episode, episode-major
+    for k in range(4):
+        predicted = rollout.step(np.repeat(recording.actions[3 + k], 2))
+        np.testing.assert_allclose(predicted[::2], expected[:, k], atol=1e-4)
+        np.testing.assert_array_equal(predicted[::2], predicted[1::2])
+
+
+def test_learned_planners_evaluate_from_their_files(tmp_path) -> None:
+    tiny_world_model(tmp_path)
+    net = ResidualDynamics(ENV.num_humans, 8, ENV.dt)
+    save_residual(tmp_path / "planning.pt", ResidualTrainResult(net, [], {}), {})
+    params = PlanningParams(horizon=2, prefix_length=1)
+    files = {"vae": tmp_path / "vae.pt", "lstm": tmp_path / "lstm.pt"}
+    result = evaluate_method(
+        "vae-lstm-mpc", env_params=ENV, scenario_seed=3, episodes=2, planning=params,
+        planner_files=files,
+    )  # fmt: skip
+    assert result.episodes.num_rows == 2
+    assert result.settings["model_files"]["vae"] == str(tmp_path / "vae.pt")
+    # wm-mpc with an untrained correction (zero at initialisation) is cv-mpc
+    wm = evaluate_method(
+        "wm-mpc", env_params=ENV, scenario_seed=3, episodes=3, planning=params,
+        planner_files={"planning_model": tmp_path / "planning.pt"},
+    )  # fmt: skip
+    cv = evaluate_method("cv-mpc", env_params=ENV, scenario_seed=3, episodes=3, planning=params)
+    assert wm.episodes["success"].to_pylist() == cv.episodes["success"].to_pylist()
+
+
+def test_a_missing_or_misplaced_model_file_is_one_line(tmp_path) -> None:
+    with pytest.raises(FileNotFoundError, match="train-planning-model"):
+        model_files("wm-mpc", {"planning_model": tmp_path / "nope.pt"})
+    with pytest.raises(ValueError, match="reads no vae file"):
+        model_files("cv-mpc", {"vae": tmp_path / "vae.pt"})
+    with pytest.raises(ValueError, match="not a planner"):
+        evaluate_method(
+            "orca", env_params=ENV, scenario_seed=3, episodes=1,
+            planner_files={"vae": tmp_path / "vae.pt"},
+        )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [("planning.oracle_seed=-1", "planning.oracle_seed"),
+     ("planning.oracle_clairvoyant=maybe", "planning.oracle_clairvoyant")],
+)  # fmt: skip
+def test_bad_oracle_values_name_their_key(tmp_path, override: str, key: str) -> None:
+    path = tmp_path / "params.yaml"
+    path.write_text("seed: 0\n")
+    with pytest.raises(ConfigError, match=key):
+        load_params(path, [override])
+
+
+def test_the_constant_velocity_planner_is_unchanged_by_the_shared_cost() -> None:
+    # Planner.scores and the oracle share step_gain: a candidate's score on a free path is the
+    # discounted progress alone.
+    obs = np.zeros((1, 23))
+    obs[0, :2] = (3.0, 0.0)
+    obs[0, 2::7], obs[0, 3::7], obs[0, 6::7] = 8.0, 8.0, ENV.human_radius
+    params = PlanningParams(horizon=2, prefix_length=2, continuations=("stop",))
+    planner = Planner(ConstantVelocityModel(ENV), params, ENV)
+    planner.model.reset(obs)
+    scores = planner.scores(obs[:, :2]).reshape(16)
+    step = ENV.robot_max_speed * ENV.dt
+    assert scores[5] == pytest.approx(step + params.discount * step)  # forward, forward
