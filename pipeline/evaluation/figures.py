@@ -46,10 +46,13 @@ METHOD_COLORS: dict[str, str] = {
     "orca": "#7f7f7f",
     "sfm": "#8c564b",
     "cv-mpc": "#17becf",
+    "wm-mpc": "#bcbd22",
+    "vae-lstm-mpc": "#e377c2",
+    "oracle-mpc": "#000000",
 }
 """One colour per method, the same in every figure."""
 
-_FALLBACK_COLORS = ("#17becf", "#bcbd22", "#e377c2")
+_FALLBACK_COLORS = ("#aec7e8", "#ffbb78", "#98df8a")
 
 
 def _color(method: str, index: int) -> str:

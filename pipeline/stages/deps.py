@@ -27,6 +27,8 @@ STAGE_MODULES: dict[str, str] = {
     "evaluate": "pipeline.stages.evaluate",
     "evaluate_baseline": "pipeline.stages.evaluate",
     "evaluate_planner": "pipeline.stages.evaluate",
+    "evaluate_wm_mpc": "pipeline.stages.evaluate",
+    "evaluate_vae_lstm_mpc": "pipeline.stages.evaluate",
     "train_planning_model": "pipeline.stages.train_planning_model",
     "predict": "pipeline.stages.predict",
     "report": "pipeline.stages.report",

@@ -15,9 +15,9 @@ own speed, and the position and velocity, relative to it, of every other human a
 robot (whose velocity follows from the action it executes), all rotated into the frame of the
 human's heading of motion, so one turn of the scene is one turn of the answer. Its last layer
 starts at zero: an untrained model *is* the constant-velocity baseline. It is trained through
-open-loop rollouts of ``horizon`` steps (the loss sums every step's squared position error, as
-PlaNet's overshooting and TD-MPC's latent rollouts do), on the random-policy rollouts of
-``collect``. There is no lossy bottleneck: positions in, positions out.
+open-loop rollouts of ``horizon`` steps (the loss averages every step's Euclidean position
+error, as PlaNet's overshooting and TD-MPC's latent rollouts do), on the random-policy rollouts
+of ``collect``. There is no lossy bottleneck: positions in, positions out.
 """
 
 from __future__ import annotations

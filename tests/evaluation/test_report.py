@@ -125,6 +125,9 @@ def test_build_report_writes_every_file(report):
         "maspm",
         "2stepahead-maspm",
         "cv-mpc",
+        "wm-mpc",
+        "vae-lstm-mpc",
+        "oracle-mpc",
     ]
     assert content["scenario_seed"] == SCENARIO_SEED and content["episodes"] == EPISODES
     assert set(content["comparisons"]) == {"orca", "sfm"}
@@ -151,7 +154,10 @@ def test_build_report_writes_every_file(report):
         "## Figures",
     ):
         assert heading in summary
-    absent = "wm-dueling-dqn, 2stepahead, maspm, 2stepahead-maspm, cv-mpc"
+    absent = (
+        "wm-dueling-dqn, 2stepahead, maspm, 2stepahead-maspm, cv-mpc, wm-mpc, vae-lstm-mpc, "
+        "oracle-mpc"
+    )
     assert f"**Not evaluated: {absent}.**" in summary
     assert "![scenarios.gif](figures/scenarios.gif)" in summary
 

@@ -257,3 +257,34 @@ def test_the_constant_velocity_planner_is_unchanged_by_the_shared_cost() -> None
     scores = planner.scores(obs[:, :2]).reshape(16)
     step = ENV.robot_max_speed * ENV.dt
     assert scores[5] == pytest.approx(step + params.discount * step)  # forward, forward
+
+
+def test_bench_plan_reports_decisions_per_cpu_second(tmp_path) -> None:
+    from pipeline.bench import bench_plan
+
+    tiny_world_model(tmp_path)
+    files = {"vae-lstm-mpc": {"vae": tmp_path / "vae.pt", "lstm": tmp_path / "lstm.pt"}}
+    rows = bench_plan(
+        ("oracle-mpc", "vae-lstm-mpc"), (1, 3), env_params=ENV,
+        planning=PlanningParams(horizon=2, prefix_length=1), files=files, seconds=0.05,
+    )  # fmt: skip
+    assert [(r["planner"], r["envs"]) for r in rows] == [
+        ("oracle-mpc", 1), ("oracle-mpc", 3), ("vae-lstm-mpc", 1), ("vae-lstm-mpc", 3)
+    ]  # fmt: skip
+    for row in rows:
+        assert row["decisions_per_cpu_s"] > 0
+        assert row["cpu_ms_per_decision"] == pytest.approx(1000 / row["decisions_per_cpu_s"])
+
+
+def test_evaluate_refuses_model_files_for_a_method_without_them(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    (tmp_path / "params.yaml").write_text("seed: 0\n")
+    result = CliRunner().invoke(
+        app, ["evaluate", "--method", "orca", "--vae", str(tmp_path / "vae.pt"), "--no-tracking",
+              "--params", str(tmp_path / "params.yaml"), "--out-dir", str(tmp_path)],
+    )  # fmt: skip
+    assert result.exit_code != 0
+    assert "--vae: only for a planner" in result.output
