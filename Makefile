@@ -15,7 +15,7 @@ CORES := $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 JOBS ?= $(CORES)
 THREADS ?= $(shell j=$(JOBS); t=$$(( $(CORES) / (j > 0 ? j : 1) )); echo $$(( t > 0 ? t : 1 )))
 
-.PHONY: setup run repro test lint bench clean
+.PHONY: setup run repro study test lint bench clean
 
 setup: $(STAMP)
 
@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet "$(TORCH)"
-	$(BIN)/pip install --quiet -e ".[pipeline,dev]"
+	$(BIN)/pip install --quiet -e ".[pipeline,sweep,dev]"
 	touch $(STAMP)
 
 # dvc runs each stage's `socnav-wm …` command, so the venv's bin goes first on PATH.
@@ -43,7 +43,8 @@ run:
 # trainings, start first and the dueling-dqn ones fill the end, so that the last job to finish
 # is a short one. The evaluations follow the same way, and the final `dvc repro` runs the rest
 # (the report) and finds everything else up to date. A training's numbers do not depend on its
-# thread count or on the order. JOBS=1 gives the plain sequential `dvc repro`.
+# thread count or on the order. JOBS=1 gives the plain sequential `dvc repro report`. The
+# studies (`study_*` stages: grids of agent runs, hours on two cores) are not part of it.
 PARALLEL = OMP_NUM_THREADS=$(THREADS) xargs -n 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
 
 repro:
@@ -52,7 +53,12 @@ repro:
 		| awk '/@dueling-dqn-/ { short = short $$0 "\n"; next } { print } END { printf "%s", short }' \
 		| $(PARALLEL)
 	dvc stage list --name-only | grep '^evaluate' | $(PARALLEL)
-	dvc repro
+	dvc repro report
+
+# The studies of params.yaml's `studies:` (socnav-wm sweep on local Ray, one task per core), after
+# the world model they train on.
+study: $(STAMP)
+	PATH="$(CURDIR)/$(BIN):$$PATH" dvc repro $$(dvc stage list --name-only | grep '^study_')
 
 test: $(STAMP)
 	$(BIN)/ruff check .

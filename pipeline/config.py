@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal
 
 import yaml
-from pydantic import BaseModel, Field, ValidationError, field_validator
+from pydantic import BaseModel, BeforeValidator, Field, ValidationError, field_validator
 
 from pipeline.agents.baselines import OrcaBaselineParams, SfmBaselineParams
 from pipeline.agents.params import METHOD_NAMES, VARIANT_NAMES, AgentParams
@@ -50,6 +50,7 @@ __all__ = [
     "Params",
     "ReportParams",
     "STAGE_SECTIONS",
+    "StudyParams",
     "VaeParams",
     "flatten",
     "load_params",
@@ -254,6 +255,71 @@ class PlanningModelParams(Section):
         return _distinct_non_negative(value)
 
 
+GridValue = bool | int | float | str
+
+
+def _seed_range(value: Any) -> Any:
+    """``"0-4"`` → ``[0, 1, 2, 3, 4]`` (the CLI's spelling); lists pass through."""
+    if isinstance(value, str):
+        first, sep, last = value.partition("-")
+        if not (sep and first.isdigit() and last.isdigit() and int(first) <= int(last)):
+            raise ValueError(f"expected a list of seeds or a range like '0-4', got {value!r}")
+        return list(range(int(first), int(last) + 1))
+    return value
+
+
+class StudyParams(Section):
+    """One study: the agent runs ``variants`` × ``seeds`` × every combination of ``grid``'s
+    values, each exactly ``socnav-wm train-agent --variant V --seed S --set KEY=VALUE …``
+    followed by ``socnav-wm evaluate`` (``socnav-wm sweep --study NAME`` runs it)."""
+
+    SECTION: ClassVar[str] = "studies.<name>"
+
+    variants: list[str] = Field(min_length=1)
+    """Agent variants of every grid point."""
+    seeds: Annotated[list[int], BeforeValidator(_seed_range)] = Field(min_length=1)
+    """Training seeds of every grid point (a list, or a range such as ``0-4``)."""
+    grid: dict[str, list[GridValue]] = Field(default_factory=dict)
+    """Dotted ``params.yaml`` key → the values it takes (any key ``--set`` accepts); every
+    combination is one grid point. Empty: the shipped parameters only."""
+    overrides: list[str] = Field(default_factory=list)
+    """``--set`` overrides applied to every run of the study before the grid's values."""
+
+    @field_validator("variants")
+    @classmethod
+    def _known_variants(cls, value: list[str]) -> list[str]:
+        return _known_distinct_variants(value)
+
+    @field_validator("seeds")
+    @classmethod
+    def _distinct_seeds(cls, value: list[int]) -> list[int]:
+        return _distinct_non_negative(value)
+
+    @field_validator("grid")
+    @classmethod
+    def _non_empty_values(cls, value: dict[str, list[GridValue]]) -> dict[str, list[GridValue]]:
+        for key, values in value.items():
+            if not values:
+                raise ValueError(f"{key}: lists no values")
+            if len(set(map(repr, values))) != len(values):
+                raise ValueError(f"{key}: a value is listed twice in {values}")
+        return value
+
+
+def _default_studies() -> dict[str, StudyParams]:
+    return {
+        "horizon": StudyParams(
+            variants=["2stepahead", "2stepahead-maspm"],
+            seeds=[0, 1, 2, 3, 4],
+            grid={"agent.horizon": [2, 4, 8, 16]},
+        ),
+        "seeds": StudyParams(variants=list(VARIANT_NAMES), seeds=[0, 1, 2, 3, 4]),
+        "sort_humans": StudyParams(
+            variants=["dueling-dqn"], seeds=[0, 1, 2], grid={"agent.sort_humans": [True, False]}
+        ),
+    }
+
+
 class Params(Section):
     """Everything ``params.yaml`` can hold; every section is optional."""
 
@@ -281,6 +347,9 @@ class Params(Section):
     """The planning world model (wm-mpc's); see pipeline/worldmodel/residual.py."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
+    studies: dict[str, StudyParams] = Field(default_factory=_default_studies)
+    """Named grids of agent runs (``socnav-wm sweep --study NAME``, ``dvc repro study_NAME``);
+    no stage of the default pipeline reads them."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -535,8 +604,13 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "evaluate": ("env", "eval", "experiment.seeds"),
     "evaluate_baseline": ("env", "eval", "baselines"),
     "evaluate_planner": ("env", "eval", "planning"),
+    "evaluate_wm_mpc": ("env", "eval", "planning"),
+    "evaluate_vae_lstm_mpc": ("env", "eval", "planning"),
     "train_planning_model": ("env", "planning_model"),
     "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
+    "study_horizon": ("env", "eval", "agent", "studies.horizon"),
+    "study_seeds": ("env", "eval", "agent", "studies.seeds"),
+    "study_sort_humans": ("env", "eval", "agent", "studies.sort_humans"),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
 name is one key of a section). ``evaluate_baseline`` reads ``baselines.<its baseline>`` only:

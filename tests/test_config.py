@@ -311,6 +311,7 @@ def test_params_dict_is_plain_and_json_able() -> None:
         "planning",
         "planning_model",
         "report",
+        "studies",
     ]
     assert data["env"]["human_policy"] == "mixed"
     assert json.loads(json.dumps(data)) == data

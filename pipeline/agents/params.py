@@ -148,8 +148,8 @@ class AgentParams(Section):
     """Bootstrap through time-limit truncations (true) or treat timeouts as terminal (paper)."""
     sort_humans: bool = True
     """Order the observation's humans nearest first before any variant sees it (the simulator
-    lists them in spawn order). The single largest gain measured: greedy success 66% → 83%
-    after 4000 episodes of `dueling-dqn`. A world model should be trained on the same order."""
+    lists them in spawn order; the `sort_humans` study in params.yaml measures what it is worth).
+    A world model should be trained on the same order."""
     horizon: int = Field(2, gt=0)
     """Imagined steps of `2stepahead` and `2stepahead-maspm` (the paper tried 2, 4, 8, 16)."""
     maspm_hidden_features: bool = False
