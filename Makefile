@@ -36,29 +36,29 @@ run:
 	exit $$status
 
 # `dvc repro` with the agent trainings and the evaluations in parallel (with whatever `dvc` is
-# on PATH). DVC runs one stage at a time, and the trainings (independent stages, minutes each on
-# one core) are most of the pipeline's time, so they run first as JOBS `dvc repro --single-item`
+# on PATH). DVC runs one stage at a time, and the trainings (the agents and the planning models:
+# independent stages, minutes each on one core) are most of the pipeline's time, so they run first as JOBS `dvc repro --single-item`
 # processes: DVC releases its repository lock while a stage's command runs, and --wait-for-lock
 # queues the jobs' short bookkeeping (hashing, dvc.lock). The world-model variants, the longest
 # trainings, start first and the dueling-dqn ones fill the end, so that the last job to finish
 # is a short one. The evaluations follow the same way, and the final `dvc repro` runs the rest
 # (the report) and finds everything else up to date. A training's numbers do not depend on its
 # thread count or on the order. JOBS=1 gives the plain sequential `dvc repro report`. The
-# studies (`study_*` stages: grids of agent runs, hours on two cores) are not part of it.
+# studies (studies/dvc.yaml: grids of agent runs, hours on two cores) are not part of it.
 PARALLEL = OMP_NUM_THREADS=$(THREADS) xargs -n 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
 
 repro:
 	dvc repro train_lstm
-	dvc stage list --name-only | grep '^train_agent@' \
+	dvc stage list --name-only | grep -E '^(train_planning_model|train_agent)@' \
 		| awk '/@dueling-dqn-/ { short = short $$0 "\n"; next } { print } END { printf "%s", short }' \
 		| $(PARALLEL)
 	dvc stage list --name-only | grep '^evaluate' | $(PARALLEL)
 	dvc repro report
 
-# The studies of params.yaml's `studies:` (socnav-wm sweep on local Ray, one task per core), after
-# the world model they train on.
+# The studies of params.yaml's `studies:` (studies/dvc.yaml: socnav-wm sweep on local Ray, one
+# task per core), after the world model they train on.
 study: $(STAMP)
-	PATH="$(CURDIR)/$(BIN):$$PATH" dvc repro $$(dvc stage list --name-only | grep '^study_')
+	PATH="$(CURDIR)/$(BIN):$$PATH" dvc repro studies/dvc.yaml
 
 test: $(STAMP)
 	$(BIN)/ruff check .
