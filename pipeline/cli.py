@@ -630,30 +630,35 @@ def check(
 @friendly_errors
 def deps(
     check: Annotated[
-        Path | None,
-        typer.Option(help="Compare with this dvc.yaml; exit 1 if a stage's deps differ."),
+        list[Path] | None,
+        typer.Option(
+            help="Compare with this dvc.yaml (repeatable: dvc.yaml, studies/dvc.yaml); exit 1 "
+            "if a stage's deps differ."
+        ),
     ] = None,
     write: Annotated[
-        Path | None,
-        typer.Option(help="Rewrite the source deps of this dvc.yaml's stages to match."),
+        list[Path] | None,
+        typer.Option(help="Rewrite the source deps of this dvc.yaml's stages (repeatable)."),
     ] = None,
 ) -> None:
-    """Each stage's source dependencies: the import closure of its module (what dvc.yaml
-    lists)."""
+    """Each stage's source dependencies: the import closure of its module (what dvc.yaml and
+    studies/dvc.yaml list)."""
     from pipeline.stages.deps import dvc_yaml_differences, stage_dependencies, write_dvc_yaml
 
-    if write is not None:
-        changed = write_dvc_yaml(write)
-        typer.echo(f"{write}: {'updated' if changed else 'already up to date'}")
+    if write:
+        for path in write:
+            changed = write_dvc_yaml(path)
+            typer.echo(f"{path}: {'updated' if changed else 'already up to date'}")
         return
 
-    if check is not None:
-        problems = dvc_yaml_differences(check)
+    if check:
+        problems = [line for path in check for line in dvc_yaml_differences(path)]
         for line in problems:
             typer.echo(line, err=True)
         if problems:
             raise typer.Exit(code=1)
-        typer.echo(f"{check}: every stage lists exactly the sources it executes")
+        files = ", ".join(map(str, check))
+        typer.echo(f"{files}: every stage lists exactly the sources it executes")
         return
     for stage, files in stage_dependencies().items():
         typer.echo(f"{stage}:")
@@ -736,6 +741,83 @@ def render(
         for e in runs
     )
     typer.echo(f"wrote {out} ({len(frames)} frames; {outcomes})")
+
+
+@app.command()
+@friendly_errors
+def sweep(
+    study: Annotated[
+        str | None,
+        typer.Option(help="A study of params.yaml's `studies:` (its variants, seeds and grid)."),
+    ] = None,
+    variants: Annotated[
+        str | None,
+        typer.Option(help="Comma-separated variants (replace the study's), e.g. 2stepahead,maspm."),
+    ] = None,
+    seeds: Annotated[
+        str | None, typer.Option(help="Training seeds (replace the study's): 0-4 or 0,2,7.")
+    ] = None,
+    grid: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="A parameter and its values, KEY=V1,V2,… (repeatable; replaces the study's grid)."
+        ),
+    ] = None,
+    name: Annotated[
+        str | None, typer.Option(help="The sweep's name (default: the study's); names its folders.")
+    ] = None,
+    params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    overlays: OverlayOption = None,
+    address: Annotated[
+        str | None,
+        typer.Option(help="A running Ray cluster (auto, HOST:PORT); default: Ray on this machine."),
+    ] = None,
+    cpus: Annotated[
+        int | None, typer.Option(min=1, help="Local Ray's CPUs: runs at once (default: cores).")
+    ] = None,
+    vae: Annotated[Path, typer.Option(help="Frozen VAE.")] = Path("models/vae.pt"),
+    lstm: Annotated[Path, typer.Option(help="Frozen LSTM.")] = Path("models/lstm.pt"),
+    runs_dir: Annotated[
+        Path | None,
+        typer.Option(help="Every run's files and checkpoints (default: data/studies/NAME)."),
+    ] = None,
+    out_dir: Annotated[
+        Path | None,
+        typer.Option(help="results.parquet, summary.md, figures (default: reports/studies/NAME)."),
+    ] = None,
+    no_tracking: NoTrackingOption = False,
+) -> None:
+    """Train and evaluate a grid of agent runs (variants × seeds × parameter values) as Ray tasks,
+    each exactly `train-agent --set …` then `evaluate`; finished runs are skipped, unfinished ones
+    resume from their checkpoints, a failed one does not stop the others (docs/cluster.md)."""
+    params = _load(params_path, overlays, overrides)
+    from pipeline import sweep as sweeping
+
+    base = sweeping.named_study(params, study) if study is not None else None
+    chosen = sweeping.study_from_options(base, variants, seeds, grid or [])
+    sweep_name = name or study
+    if sweep_name is None:
+        raise UserError("--name: required without --study")
+    plan = sweeping.plan_sweep(
+        sweep_name,
+        chosen,
+        params_path=params_path,
+        overlays=overlays or [],
+        overrides=overrides or [],
+        runs_dir=runs_dir,
+        out_dir=out_dir,
+        vae=vae,
+        lstm=lstm,
+    )
+    outcome = sweeping.run_sweep(plan, address=address, cpus=cpus, tracking=not no_tracking)
+    typer.echo(sweeping.describe(outcome))
+    if outcome.failed:
+        first = outcome.failed[0]
+        raise UserError(
+            f"{len(outcome.failed)} of {len(plan.runs)} runs failed (first: {first['run']}: "
+            f"{first.get('error', '')}); rerun the same command to retry them"
+        )
 
 
 # --------------------------------------------------------------------------- bench

@@ -11,6 +11,7 @@ mlflow is imported inside the functions that need it: the import takes seconds, 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import getpass
 import json
 import logging
@@ -36,6 +37,7 @@ __all__ = [
     "TrackingError",
     "check_tracking",
     "experiment_name",
+    "nested_under",
     "stage_run",
     "tracking_uri",
 ]
@@ -321,6 +323,26 @@ class _MlflowRun(Run):
         return ids
 
 
+_PARENT: contextvars.ContextVar[tuple[str, dict[str, str]] | None] = contextvars.ContextVar(
+    "socnav_wm_parent_run", default=None
+)
+
+
+@contextlib.contextmanager
+def nested_under(run_id: str | None, tags: Mapping[str, Any] | None = None) -> Iterator[None]:
+    """Make every run :func:`stage_run` starts inside the block a child of MLflow run ``run_id``
+    (MLflow's ``mlflow.parentRunId`` tag, which its UI nests by) carrying ``tags`` too (a sweep's
+    grid values). ``run_id=None`` (tracking off) changes nothing."""
+    if run_id is None:
+        yield
+        return
+    token = _PARENT.set((run_id, {str(k): str(v) for k, v in (tags or {}).items()}))
+    try:
+        yield
+    finally:
+        _PARENT.reset(token)
+
+
 @contextlib.contextmanager
 def stage_run(
     stage: str,
@@ -360,6 +382,10 @@ def stage_run(
     if os.environ.get("DVC_EXP_NAME"):
         tags["dvc_exp_name"] = os.environ["DVC_EXP_NAME"]
     tags.update(machine_tags())
+    parent = _PARENT.get()
+    if parent is not None:
+        tags["mlflow.parentRunId"] = parent[0]
+        tags.update(parent[1])
     # No user name in containers without an /etc/passwd entry: leave the tag out.
     with contextlib.suppress(KeyError, OSError):
         tags["mlflow.user"] = getpass.getuser()

@@ -599,7 +599,10 @@ def test_save_resolved_writes_only_the_given_sections(tmp_path: Path) -> None:
 def test_stage_sections_follow_dvc_yaml() -> None:
     from pipeline.stages import predict
 
-    stages = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+    stages = {
+        **yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"],
+        **yaml.safe_load((ROOT / "studies" / "dvc.yaml").read_text())["stages"],
+    }
     sections = {**STAGE_SECTIONS, "predict": predict.SECTIONS}
     assert set(sections) == set(stages)
     for name, stage in stages.items():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import yaml
 
 from pipeline.stages.deps import (
@@ -19,6 +20,23 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_dvc_yaml_lists_exactly_the_sources_each_stage_executes() -> None:
     assert dvc_yaml_differences(ROOT / "dvc.yaml") == []
+    assert dvc_yaml_differences(ROOT / "studies" / "dvc.yaml") == []
+
+
+def test_the_studies_are_a_pipeline_of_their_own() -> None:
+    """A plain `dvc repro` (the root dvc.yaml) never starts a study; each study stage runs from
+    the repository root, so that its paths and params.yaml are the root's."""
+    root = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+    studies = yaml.safe_load((ROOT / "studies" / "dvc.yaml").read_text())["stages"]
+    assert not [name for name in root if name.startswith("study_")]
+    assert set(studies) == {"study_horizon", "study_seeds", "study_sort_humans"}
+    for name, stage in studies.items():
+        assert stage["wdir"] == "..", name
+        assert stage["cmd"] == f"socnav-wm sweep --study {name.removeprefix('study_')}"
+        assert stage["deps"][:2] == ["models/vae.pt", "models/lstm.pt"]
+    # A file that is no pipeline file is refused rather than checked against either list.
+    with pytest.raises(ValueError, match="params.yaml: not a dvc.yaml"):
+        dvc_yaml_differences(ROOT / "params.yaml")
 
 
 def test_a_missing_or_extra_dependency_is_reported(tmp_path: Path) -> None:

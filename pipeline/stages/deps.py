@@ -1,10 +1,11 @@
 """Each stage's source dependencies, computed from its imports.
 
-A stage's command runs its module in :mod:`pipeline.stages`; the Python files it can execute
-are that module's import closure within the ``pipeline`` package: every ``import`` statement of
-every file reached (at the top of a module or inside a function alike), and the ``__init__.py``
-of every package on the way. ``dvc.yaml`` lists exactly these files as each stage's deps, and
-``tests/test_dvc_deps.py`` fails when the two disagree; ``socnav-wm deps`` prints the lists.
+A stage's command runs its module in :mod:`pipeline.stages` (a study's: :mod:`pipeline.sweep`);
+the Python files it can execute are that module's import closure within the ``pipeline``
+package: every ``import`` statement of every file reached (at the top of a module or inside a
+function alike), and the ``__init__.py`` of every package on the way. ``dvc.yaml`` and
+``studies/dvc.yaml`` list exactly these files as each stage's deps, and
+``tests/test_dvc_deps.py`` fails when they disagree; ``socnav-wm deps`` prints the lists.
 
 Two modules are deliberately not dependencies, nor followed: ``pipeline/cli.py`` (it parses
 options and calls a stage function, and listing it would rerun every stage on an edit of any
@@ -32,8 +33,19 @@ STAGE_MODULES: dict[str, str] = {
     "train_planning_model": "pipeline.stages.train_planning_model",
     "predict": "pipeline.stages.predict",
     "report": "pipeline.stages.report",
+    # studies/dvc.yaml: `socnav-wm sweep --study NAME` (train-agent and evaluate per run).
+    "study_horizon": "pipeline.sweep",
+    "study_seeds": "pipeline.sweep",
+    "study_sort_humans": "pipeline.sweep",
 }
-"""``dvc.yaml`` stage name → the module its command runs."""
+"""Stage name → the module its command runs."""
+
+PIPELINE_FILES: dict[str, tuple[str, ...]] = {
+    "dvc.yaml": tuple(stage for stage in STAGE_MODULES if not stage.startswith("study_")),
+    "studies/dvc.yaml": tuple(stage for stage in STAGE_MODULES if stage.startswith("study_")),
+}
+"""Each pipeline file → its stages: the paper's pipeline at the root, the studies (hours of
+trainings that a plain ``dvc repro`` must not start) in ``studies/``."""
 
 NOT_DEPENDENCIES = frozenset({"pipeline.cli", "pipeline.tracking"})
 
@@ -99,9 +111,20 @@ def import_closure(module: str) -> list[str]:
     return sorted(path.relative_to(root).as_posix() for path in files)
 
 
-def stage_dependencies() -> dict[str, list[str]]:
-    """Stage name → the source files it depends on (:func:`import_closure` of its module)."""
-    return {stage: import_closure(module) for stage, module in STAGE_MODULES.items()}
+def stage_dependencies(path: str | Path | None = None) -> dict[str, list[str]]:
+    """Stage name → the source files it depends on (:func:`import_closure` of its module): of
+    every stage, or of those of pipeline file ``path`` (``…/studies/dvc.yaml``: the studies',
+    any other ``dvc.yaml``: the root pipeline's)."""
+    stages = STAGE_MODULES if path is None else PIPELINE_FILES[_pipeline_file(path)]
+    return {stage: import_closure(STAGE_MODULES[stage]) for stage in stages}
+
+
+def _pipeline_file(path: str | Path) -> str:
+    """The key of :data:`PIPELINE_FILES` that ``path`` is (a copy of)."""
+    path = Path(path)
+    if path.name != "dvc.yaml":
+        raise ValueError(f"{path}: not a dvc.yaml")
+    return "studies/dvc.yaml" if path.parent.name == "studies" else "dvc.yaml"
 
 
 def _stage_definitions(dvc_yaml: dict) -> dict[str, dict]:
@@ -119,7 +142,7 @@ def dvc_yaml_differences(path: str | Path = "dvc.yaml") -> list[str]:
 
     definitions = _stage_definitions(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
     problems = []
-    for stage, expected in stage_dependencies().items():
+    for stage, expected in stage_dependencies(path).items():
         if stage not in definitions:
             problems.append(f"{path}: no stage {stage!r}")
             continue
@@ -144,7 +167,7 @@ def write_dvc_yaml(path: str | Path = "dvc.yaml") -> bool:
     import re
 
     path = Path(path)
-    expected = stage_dependencies()
+    expected = stage_dependencies(path)
     lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
     out: list[str] = []
     stage: str | None = None

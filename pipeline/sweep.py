@@ -1,0 +1,776 @@
+"""``socnav-wm sweep``: a grid of agent runs (variants × seeds × parameter values) as Ray tasks.
+
+Each run is exactly ``socnav-wm train-agent --variant V --seed S --set KEY=VALUE …`` followed by
+``socnav-wm evaluate --method V`` on that one agent (same code, same parameters: its weights are
+bit for bit the serial command's), in a Ray task of one CPU and one torch thread. Ray starts
+locally (one task per core) unless ``address`` names a running cluster (docs/cluster.md).
+
+Layout (``runs_dir``: ``data/studies/<name>``, ``out_dir``: ``reports/studies/<name>``)::
+
+    runs_dir/<run>/agents/<variant>/seed-<S>.pt      the agent file (train-agent's)
+    runs_dir/<run>/training/<variant>/seed-<S>.parquet
+    runs_dir/<run>/metrics/{agents,eval}/…            train-agent's and evaluate's metrics
+    runs_dir/<run>/eval/<variant>.parquet              the evaluation's episodes
+    runs_dir/<run>/result.json                         written last: the run is finished
+    runs_dir/checkpoints/                              resumable trainings (train-agent's)
+    out_dir/results.parquet                            one row per run: grid values × metrics
+    out_dir/summary.md                                 means and 95% intervals over seeds
+    out_dir/figures/<key>.png                          each metric against each grid parameter
+
+A run whose ``result.json`` carries the same fingerprint (its resolved parameters and the world
+model's files) is skipped; an unfinished one resumes from its checkpoint; a failed one is
+reported with its error and does not stop the others. Only this module imports ray, and only
+inside :func:`run_sweep`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pipeline.config import ConfigError, Params, StudyParams, load_params, params_dict
+
+__all__ = [
+    "RunSpec",
+    "SweepPlan",
+    "SweepResult",
+    "execute_run",
+    "parse_grid",
+    "parse_seeds",
+    "plan_sweep",
+    "run_sweep",
+    "write_results",
+]
+
+RESULT_FILE = "result.json"
+# The metrics of a run that the summary and the figures show (all of them go to the table).
+SUMMARY_METRICS = (
+    "success",
+    "human_collision",
+    "wall_collision",
+    "discomfort",
+    "time_to_reach_goal",
+    "train_episodes_to_solve",
+    "train_cpu_s",
+)
+_RUN_SECTIONS = ("env", "agent", "eval")  # what train-agent and evaluate read
+
+
+# ---------------------------------------------------------------------------------------------
+# The grid
+# ---------------------------------------------------------------------------------------------
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"0-4"`` → ``[0, 1, 2, 3, 4]``; ``"0,2,7"`` → ``[0, 2, 7]`` (``--seeds``)."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        match = re.fullmatch(r"(\d+)(?:-(\d+))?", part)
+        if not match or (match[2] is not None and int(match[2]) < int(match[1])):
+            raise ConfigError(f"--seeds: expected seeds like '0-4' or '0,2,7', got {text!r}")
+        last = int(match[2]) if match[2] is not None else int(match[1])
+        seeds += range(int(match[1]), last + 1)
+    if len(set(seeds)) != len(seeds):
+        raise ConfigError(f"--seeds: a seed is listed twice in {text!r}")
+    return seeds
+
+
+def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:
+    """``["agent.horizon=2,4,8"]`` → ``{"agent.horizon": [2, 4, 8]}`` (``--grid``, repeatable);
+    each value is parsed as YAML, like ``--set``'s."""
+    grid: dict[str, list[Any]] = {}
+    for item in items:
+        key, sep, values = item.partition("=")
+        key = key.strip()
+        if not sep or not key or not values.strip():
+            raise ConfigError(f"--grid {item!r}: expected KEY=VALUE,VALUE,… (agent.horizon=2,4)")
+        if key in grid:
+            raise ConfigError(f"--grid: {key} is given twice")
+        try:
+            grid[key] = [yaml.safe_load(v.strip()) for v in values.split(",")]
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--grid {item!r}: {str(exc).splitlines()[0]}") from None
+    return grid
+
+
+def _format_value(value: Any) -> str:
+    """A grid value as ``--set`` spells it (YAML: ``true``, ``4``, ``0.5``, ``sfm``)."""
+    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One grid point of one variant and one seed."""
+
+    variant: str
+    seed: int
+    values: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def overrides(self) -> list[str]:
+        """The run's ``--set`` values (after the study's own overrides)."""
+        return [f"{key}={_format_value(value)}" for key, value in self.values]
+
+    @property
+    def name(self) -> str:
+        """``2stepahead/agent.horizon=4/seed-0``: the run's name, in MLflow too."""
+        return "/".join([self.variant, *self.overrides, f"seed-{self.seed}"])
+
+    @property
+    def slug(self) -> str:
+        """The run's folder name (no ``/``)."""
+        return re.sub(r"[^A-Za-z0-9._=-]+", "_", self.name.replace("/", "__"))
+
+
+@dataclass
+class SweepPlan:
+    """A sweep, resolved: every run's parameters validated before any run starts."""
+
+    name: str
+    study: StudyParams
+    runs: list[RunSpec]
+    params: dict[RunSpec, Params]
+    fingerprints: dict[RunSpec, str]
+    runs_dir: Path
+    out_dir: Path
+    vae: Path
+    lstm: Path
+
+    @property
+    def grid_keys(self) -> list[str]:
+        return list(self.study.grid)
+
+    def run_dir(self, run: RunSpec) -> Path:
+        return self.runs_dir / run.slug
+
+    def finished(self, run: RunSpec) -> dict[str, Any] | None:
+        """The run's recorded result if it finished with the same fingerprint."""
+        path = self.run_dir(run) / RESULT_FILE
+        try:
+            result = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return None
+        if result.get("fingerprint") != self.fingerprints[run]:
+            return None
+        # JSON has no NaN: an undefined metric was written as null.
+        metrics = result.get("metrics", {})
+        result["metrics"] = {k: math.nan if v is None else v for k, v in metrics.items()}
+        return result
+
+
+def _file_digest(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def plan_sweep(
+    name: str,
+    study: StudyParams,
+    *,
+    params_path: Path = Path("params.yaml"),
+    overlays: Sequence[Path] = (),
+    overrides: Sequence[str] = (),
+    runs_dir: Path | None = None,
+    out_dir: Path | None = None,
+    vae: Path = Path("models/vae.pt"),
+    lstm: Path = Path("models/lstm.pt"),
+) -> SweepPlan:
+    """Every run of ``study``, its parameters (``params_path``, ``overlays``, ``overrides``, the
+    study's ``overrides``, then the grid values) and its fingerprint.
+
+    Raises:
+        ConfigError: a bad name, a grid key or value the parameters reject (one line, naming the
+            run), or a missing world-model file.
+    """
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
+        raise ConfigError(f"--name: {name!r} must be letters, digits, '_', '.' or '-'")
+    for path, command in ((vae, "socnav-wm train-vae"), (lstm, "socnav-wm train-lstm")):
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such world-model file (make it: {command})")
+    runs = [
+        RunSpec(variant, seed, tuple(zip(study.grid, values, strict=True)))
+        for variant in study.variants
+        for values in itertools.product(*study.grid.values())
+        for seed in study.seeds
+    ]
+    digests = {"vae": _file_digest(vae), "lstm": _file_digest(lstm)}
+    plan_params: dict[RunSpec, Params] = {}
+    fingerprints: dict[RunSpec, str] = {}
+    for run in runs:
+        sets = [*overrides, *study.overrides, *run.overrides]
+        try:
+            params = load_params(params_path, overrides=sets, overlays=list(overlays))
+        except ConfigError as exc:
+            raise ConfigError(f"sweep {name}, run {run.name}: {exc}") from None
+        plan_params[run] = params
+        data = params_dict(params)
+        identity = {
+            "variant": run.variant,
+            "seed": run.seed,
+            "params": {section: data[section] for section in _RUN_SECTIONS},
+            **digests,
+        }
+        fingerprints[run] = hashlib.sha256(
+            json.dumps(identity, sort_keys=True, default=str).encode()
+        ).hexdigest()
+    return SweepPlan(
+        name=name,
+        study=study,
+        runs=runs,
+        params=plan_params,
+        fingerprints=fingerprints,
+        runs_dir=Path(runs_dir or Path("data/studies") / name),
+        out_dir=Path(out_dir or Path("reports/studies") / name),
+        vae=vae,
+        lstm=lstm,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# One run (inside a Ray task)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RunJob:
+    """What a task needs: plain, picklable, with absolute paths (a task may run on another
+    machine, where the paths must name a shared folder)."""
+
+    spec: RunSpec
+    params: dict[str, Any]
+    fingerprint: str
+    run_dir: str
+    checkpoint_dir: str
+    vae: str
+    lstm: str
+    tracking: bool
+    tracking_uri: str | None
+    experiment: str | None
+    parent_run_id: str | None
+    threads: int = 1
+
+
+def _first_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def execute_run(job: RunJob) -> dict[str, Any]:
+    """Train and evaluate one run; returns its result (``status`` ``done`` or ``failed`` with
+    ``error``), never raises for the run's own failures."""
+    started, cpu_started = time.time(), time.process_time()
+    try:
+        return _execute(job, started, cpu_started)
+    except Exception as exc:  # noqa: BLE001 - a failed run is a result, the others go on
+        return {
+            "run": job.spec.name,
+            "status": "failed",
+            "error": _first_line(exc),
+            "wall_s": time.time() - started,
+        }
+
+
+def _execute(job: RunJob, started: float, cpu_started: float) -> dict[str, Any]:
+    import torch
+
+    from pipeline import tracking
+    from pipeline.agents.checkpoint import checkpoint_file, run_identity
+    from pipeline.io import write_json_atomic
+    from pipeline.stages import evaluate as evaluate_stage
+    from pipeline.stages import train_agent as train_stage
+
+    torch.set_num_threads(job.threads)
+    if job.tracking_uri:
+        os.environ["MLFLOW_TRACKING_URI"] = job.tracking_uri
+    if job.experiment:
+        os.environ["MLFLOW_EXPERIMENT_NAME"] = job.experiment
+    spec = job.spec
+    params = Params.model_validate(job.params)
+    run_dir = Path(job.run_dir)
+    grid_tags = {"sweep_run": spec.name, "variant": spec.variant, "training_seed": spec.seed}
+    grid_tags.update({f"grid.{key}": _format_value(value) for key, value in spec.values})
+    logged = {"variant": spec.variant, "seed": spec.seed, "grid": dict(spec.values)}
+    identity = run_identity(
+        spec.variant, params.agent, params.env, spec.seed, Path(job.vae), Path(job.lstm)
+    )
+    resumed = checkpoint_file(job.checkpoint_dir, identity).is_file()
+    with (
+        tracking.nested_under(job.parent_run_id, grid_tags),
+        tracking.stage_run(
+            "sweep-run", logged, enabled=job.tracking, run_name=f"sweep-run/{spec.name}"
+        ) as child,
+        tracking.nested_under(child.run_id, grid_tags),
+    ):
+        train_started = time.process_time()
+        train_stage.run(
+            params,
+            variant=spec.variant,
+            seed=spec.seed,
+            vae=Path(job.vae),
+            lstm=Path(job.lstm),
+            out_dir=run_dir / "agents",
+            log_dir=run_dir / "training",
+            metrics_dir=run_dir / "metrics" / "agents",
+            checkpoint_dir=Path(job.checkpoint_dir),
+            resume=True,
+            tracking=job.tracking,
+            quiet=True,
+        )
+        train_cpu = time.process_time() - train_started
+        eval_params = params.replace(experiment=params.experiment.replace(seeds=[spec.seed]))
+        evaluate_stage.run(
+            eval_params,
+            method=spec.variant,
+            agents_dir=run_dir / "agents",
+            out_dir=run_dir / "eval",
+            metrics_dir=run_dir / "metrics" / "eval",
+            tracking=job.tracking,
+            quiet=True,
+        )
+        metrics = _run_metrics(run_dir, spec)
+        metrics["train_cpu_s"] = train_cpu
+        child.log_metrics(metrics)
+    result = {
+        "run": spec.name,
+        "status": "done",
+        "fingerprint": job.fingerprint,
+        "variant": spec.variant,
+        "seed": spec.seed,
+        "grid": {key: value for key, value in spec.values},
+        "metrics": metrics,
+        "resumed": resumed,
+        "wall_s": time.time() - started,
+        "cpu_s": time.process_time() - cpu_started,
+    }
+    write_json_atomic(run_dir / RESULT_FILE, result)
+    return result
+
+
+def _run_metrics(run_dir: Path, spec: RunSpec) -> dict[str, float]:
+    """The evaluation's means and the training's summary (``train_``-prefixed) of one run."""
+    evaluation = json.loads((run_dir / "metrics" / "eval" / f"{spec.variant}.json").read_text())
+    metrics = {  # None: undefined here (e.g. the time to goal of a run that never arrives)
+        name: math.nan if v["mean"] is None else float(v["mean"])
+        for name, v in evaluation["metrics"].items()
+    }
+    training_path = run_dir / "metrics" / "agents" / spec.variant / f"seed-{spec.seed}.json"
+    training = json.loads(training_path.read_text())
+    for key, value in training.items():
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            metrics[f"train_{key}"] = float(value)
+    if training.get("episodes_to_solve") is None:  # never solved: one past the last episode
+        metrics["train_episodes_to_solve"] = float(training.get("episodes", 0)) + 1
+    return metrics
+
+
+# ---------------------------------------------------------------------------------------------
+# The sweep
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class SweepResult:
+    """Every run's result (recorded earlier, or from this sweep), in the plan's order."""
+
+    plan: SweepPlan
+    results: dict[RunSpec, dict[str, Any]] = field(default_factory=dict)
+    skipped: int = 0
+    wall_s: float = 0.0
+
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        return [r for r in self.results.values() if r.get("status") != "done"]
+
+
+def _import_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(
+            "socnav-wm sweep needs Ray, which is not installed: pip install 'socnav-wm[sweep]'"
+        ) from None
+    return ray
+
+
+def _eta(durations: Sequence[float], remaining: int, slots: int) -> str:
+    if not durations or remaining == 0:
+        return "unknown" if remaining else "0 min"
+    seconds = sum(durations) / len(durations) * math.ceil(remaining / max(slots, 1))
+    return f"about {seconds / 60:.0f} min" if seconds >= 60 else f"about {seconds:.0f} s"
+
+
+def run_sweep(
+    plan: SweepPlan,
+    *,
+    address: str | None = None,
+    cpus: int | None = None,
+    tracking: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> SweepResult:
+    """Run ``plan``'s unfinished runs as Ray tasks, then write its results (see the module
+    docstring). ``address``: a running Ray cluster (``auto``, ``HOST:PORT``, ``ray://…``); else a
+    local Ray with ``cpus`` CPUs (default: every core). ``progress`` receives one line per
+    change (default: standard error)."""
+    say = progress or (lambda line: print(line, file=sys.stderr, flush=True))
+    if cpus is not None and cpus < 1:
+        raise ConfigError(f"--cpus: must be >= 1, got {cpus}")
+    started = time.time()
+    outcome = SweepResult(plan)
+    todo = []
+    for run in plan.runs:
+        recorded = plan.finished(run)
+        if recorded is not None:
+            outcome.results[run] = recorded
+        else:
+            todo.append(run)
+    outcome.skipped = len(plan.runs) - len(todo)
+    say(
+        f"sweep {plan.name}: {len(plan.runs)} runs, {outcome.skipped} already finished, "
+        f"{len(todo)} to run"
+    )
+    if todo:
+        ray = _import_ray()
+        _run_tasks(ray, plan, todo, outcome, address, cpus, tracking, say)
+    outcome.wall_s = time.time() - started
+    write_results(outcome)
+    return outcome
+
+
+def _run_tasks(
+    ray: Any,
+    plan: SweepPlan,
+    todo: list[RunSpec],
+    outcome: SweepResult,
+    address: str | None,
+    cpus: int | None,
+    tracking: bool,
+    say: Callable[[str], None],
+) -> None:
+    from pipeline import tracking as track
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        options: dict[str, Any] = {
+            "include_dashboard": False,
+            "logging_level": "ERROR",
+            "log_to_driver": False,
+        }
+        if address is None:
+            options.update(num_cpus=cpus or os.cpu_count() or 1, object_store_memory=200 << 20)
+        try:
+            ray.init(address=address, **options)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            where = f"--address {address}" if address else "local Ray"
+            raise ConfigError(f"{where}: Ray did not start ({_first_line(exc)})") from None
+    slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    logged = {"study": plan.study.model_dump(), "runs": len(plan.runs)}
+    try:
+        with track.stage_run(
+            "sweep", logged, enabled=tracking, run_name=f"sweep/{plan.name}"
+        ) as parent:
+            parent.set_tag("sweep", plan.name)
+            uri = track.tracking_uri() if tracking else None
+            task = ray.remote(num_cpus=1, max_retries=0)(execute_run)
+            pending = {}
+            for run in todo:
+                job = RunJob(
+                    spec=run,
+                    params=params_dict(plan.params[run]),
+                    fingerprint=plan.fingerprints[run],
+                    run_dir=str(plan.run_dir(run).resolve()),
+                    checkpoint_dir=str((plan.runs_dir / "checkpoints").resolve()),
+                    vae=str(plan.vae.resolve()),
+                    lstm=str(plan.lstm.resolve()),
+                    tracking=tracking,
+                    tracking_uri=uri,
+                    experiment=track.experiment_name() if tracking else None,
+                    parent_run_id=parent.run_id,
+                )
+                pending[task.remote(job)] = run
+            durations: list[float] = []
+            done = failed = 0
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                for ref in ready:
+                    run = pending.pop(ref)
+                    try:
+                        result = ray.get(ref)
+                    except Exception as exc:  # noqa: BLE001 - a dead worker fails one run
+                        result = {"run": run.name, "status": "failed", "error": _first_line(exc)}
+                    outcome.results[run] = result
+                    if result["status"] == "done":
+                        done += 1
+                        durations.append(float(result.get("wall_s", 0.0)))
+                    else:
+                        failed += 1
+                        say(f"sweep {plan.name}: run {run.name} failed: {result['error']}")
+                running = min(len(pending), slots)
+                say(
+                    f"sweep {plan.name}: {done + failed}/{len(todo)} finished ({done} done, "
+                    f"{failed} failed), {running} running, "
+                    f"{_eta(durations, len(pending), slots)} left"
+                )
+            parent.log_metrics({"runs_done": done, "runs_failed": failed})
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+# ---------------------------------------------------------------------------------------------
+# Results
+# ---------------------------------------------------------------------------------------------
+
+
+def _interval(values: Sequence[float]) -> tuple[float, float, float]:
+    """Mean and 95% Student-t interval over seeds (NaN bounds for one seed)."""
+    from scipy import stats
+
+    values = [v for v in values if not math.isnan(v)]
+    n = len(values)
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    mean = float(sum(values) / n)
+    if n < 2:
+        return mean, math.nan, math.nan
+    sd = float(stats.tstd(values))
+    half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
+    return mean, mean - half, mean + half
+
+
+def _groups(outcome: SweepResult) -> dict[tuple[str, tuple[Any, ...]], list[dict[str, Any]]]:
+    groups: dict[tuple[str, tuple[Any, ...]], list[dict[str, Any]]] = {}
+    for run in outcome.plan.runs:
+        result = outcome.results.get(run)
+        if result and result.get("status") == "done":
+            key = (run.variant, tuple(value for _, value in run.values))
+            groups.setdefault(key, []).append(result)
+    return groups
+
+
+def write_results(outcome: SweepResult) -> list[Path]:
+    """``results.parquet``, ``summary.md`` and the figures of a sweep (atomically each)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pipeline.io import atomic_path, write_text_atomic
+
+    plan = outcome.plan
+    rows = []
+    metric_names: list[str] = []
+    for run in plan.runs:
+        result = outcome.results.get(run, {"status": "not run"})
+        metrics = result.get("metrics", {})
+        for name in metrics:
+            if name not in metric_names:
+                metric_names.append(name)
+        rows.append((run, result, metrics))
+    columns: dict[str, list[Any]] = {
+        "run": [r.name for r, _, _ in rows],
+        "variant": [r.variant for r, _, _ in rows],
+        "seed": [r.seed for r, _, _ in rows],
+    }
+    for index, key in enumerate(plan.grid_keys):
+        columns[key] = [_format_value(r.values[index][1]) for r, _, _ in rows]
+    columns["status"] = [res.get("status", "not run") for _, res, _ in rows]
+    columns["error"] = [res.get("error") for _, res, _ in rows]
+    columns["resumed"] = [res.get("resumed") for _, res, _ in rows]
+    columns["wall_s"] = [res.get("wall_s") for _, res, _ in rows]
+    for name in metric_names:
+        columns[name] = [m.get(name) for _, _, m in rows]
+    table = pa.table(
+        {
+            k: pa.array(v, type=pa.float64() if k in metric_names else None)
+            for k, v in columns.items()
+        }
+    )
+    plan.out_dir.mkdir(parents=True, exist_ok=True)
+    results_path = plan.out_dir / "results.parquet"
+    with atomic_path(results_path) as tmp:
+        pq.write_table(table, tmp)
+    summary_path = plan.out_dir / "summary.md"
+    write_text_atomic(summary_path, _summary(outcome))
+    return [results_path, summary_path, *_figures(outcome)]
+
+
+def _present_metrics(groups: Mapping[Any, list[dict[str, Any]]]) -> list[str]:
+    return [
+        m for m in SUMMARY_METRICS if any(m in r["metrics"] for g in groups.values() for r in g)
+    ]
+
+
+def _fmt(value: float, name: str) -> str:
+    if math.isnan(value):
+        return "–"
+    if name in ("success", "human_collision", "wall_collision") or name.endswith("_rate"):
+        return f"{value:.1%}"
+    return f"{value:.3g}"
+
+
+def _summary(outcome: SweepResult) -> str:
+    plan = outcome.plan
+    groups = _groups(outcome)
+    done = sum(len(v) for v in groups.values())
+    grid = ", ".join(
+        f"`{key}` ∈ {{{', '.join(map(_format_value, vals))}}}"
+        for key, vals in plan.study.grid.items()
+    )
+    lines = [
+        f"# Study `{plan.name}`",
+        "",
+        f"Variants {', '.join(plan.study.variants)}; seeds "
+        f"{', '.join(map(str, plan.study.seeds))}" + (f"; {grid}" if grid else "") + ". "
+        f"{done} of {len(plan.runs)} runs finished"
+        + (f", {len(outcome.failed)} failed" if outcome.failed else "")
+        + ". Each run: `socnav-wm train-agent` then `socnav-wm evaluate` on "
+        f"{plan.params[plan.runs[0]].eval.episodes} test scenarios; mean [95% interval over "
+        "seeds] (Student t; – with one seed).",
+        "",
+    ]
+    metrics = [
+        m for m in SUMMARY_METRICS if any(m in r["metrics"] for g in groups.values() for r in g)
+    ]
+    header = ["variant", *[f"`{k}`" for k in plan.grid_keys], "seeds", *metrics]
+    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for (variant, values), results in groups.items():
+        cells = [variant, *map(_format_value, values), str(len(results))]
+        for metric in metrics:
+            vals = [r["metrics"][metric] for r in results if metric in r["metrics"]]
+            mean, low, high = _interval(vals)
+            cell = _fmt(mean, metric)
+            if not math.isnan(low):
+                cell += f" [{_fmt(low, metric)}, {_fmt(high, metric)}]"
+            cells.append(cell)
+        lines.append("| " + " | ".join(cells) + " |")
+    if outcome.failed:
+        lines += ["", "Failed runs:", ""]
+        lines += [f"- `{r['run']}`: {r.get('error', '')}" for r in outcome.failed]
+    lines += ["", *[f"![{key}](figures/{_figure_name(key)})" for key in plan.grid_keys]]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _figure_name(key: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", key) + ".png"
+
+
+def _figures(outcome: SweepResult) -> list[Path]:
+    """Per grid parameter: each summary metric against the parameter's values, one line per
+    variant, with the 95% intervals over seeds."""
+    plan = outcome.plan
+    if not plan.grid_keys:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pipeline.io import atomic_path
+
+    groups = _groups(outcome)
+    metrics = [
+        m for m in SUMMARY_METRICS if any(m in r["metrics"] for g in groups.values() for r in g)
+    ]
+    paths = []
+    (plan.out_dir / "figures").mkdir(parents=True, exist_ok=True)
+    for index, key in enumerate(plan.grid_keys):
+        values = plan.study.grid[key]
+        numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+        fig, axes = plt.subplots(1, len(metrics), figsize=(3.2 * len(metrics), 3.0), squeeze=False)
+        for variant in plan.study.variants:
+            for axis, metric in zip(axes[0], metrics, strict=True):
+                xs, means, lows, highs = [], [], [], []
+                for position, value in enumerate(values):
+                    vals = [
+                        r["metrics"][metric]
+                        for (v, point), results in groups.items()
+                        if v == variant and point[index] == value
+                        for r in results
+                        if metric in r["metrics"]
+                    ]
+                    if not vals:
+                        continue
+                    mean, low, high = _interval(vals)
+                    xs.append(value if numeric else position)
+                    means.append(mean)
+                    lows.append(mean if math.isnan(low) else low)
+                    highs.append(mean if math.isnan(high) else high)
+                if xs:
+                    errors = [
+                        [m - lo for m, lo in zip(means, lows, strict=True)],
+                        [h - m for m, h in zip(means, highs, strict=True)],
+                    ]
+                    axis.errorbar(xs, means, yerr=errors, marker="o", capsize=3, label=variant)
+        for axis, metric in zip(axes[0], metrics, strict=True):
+            axis.set_title(metric, fontsize=9)
+            axis.set_xlabel(key, fontsize=8)
+            if not numeric:
+                axis.set_xticks(range(len(values)), [_format_value(v) for v in values])
+            elif len(values) > 1 and min(values) > 0 and max(values) / min(values) >= 8:
+                axis.set_xscale("log", base=2)
+                axis.set_xticks(values, [str(v) for v in values])
+        axes[0][0].legend(fontsize=7)
+        fig.suptitle(f"study {plan.name}: mean and 95% interval over seeds", fontsize=10)
+        fig.tight_layout()
+        path = plan.out_dir / "figures" / _figure_name(key)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=90)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def study_from_options(
+    study: StudyParams | None,
+    variants: str | None,
+    seeds: str | None,
+    grid: Sequence[str],
+) -> StudyParams:
+    """A named study with the command line's ``--variants``/``--seeds``/``--grid`` replacing its
+    own, or an ad-hoc one from them alone."""
+    values: dict[str, Any] = study.model_dump() if study is not None else {}
+    if variants is not None:
+        values["variants"] = [v.strip() for v in variants.split(",") if v.strip()]
+    if seeds is not None:
+        values["seeds"] = parse_seeds(seeds)
+    if grid:
+        values["grid"] = parse_grid(grid)
+    for option in ("variants", "seeds"):
+        if option not in values:
+            raise ConfigError(f"--{option}: required without --study")
+    try:
+        return StudyParams(**values)
+    except ValueError as exc:
+        raise ConfigError(f"sweep: {str(exc).splitlines()[0]}") from None
+
+
+def named_study(params: Params, name: str) -> StudyParams:
+    if name not in params.studies:
+        known = ", ".join(params.studies) or "none"
+        raise ConfigError(f"--study: no study {name!r} in params.yaml (studies: {known})")
+    return params.studies[name]
+
+
+def describe(outcome: SweepResult) -> str:
+    """One line: what the sweep did."""
+    plan = outcome.plan
+    done = len(outcome.results) - len(outcome.failed)
+    return (
+        f"sweep {plan.name}: {done}/{len(plan.runs)} runs done "
+        f"({outcome.skipped} skipped as finished, {len(outcome.failed)} failed) in "
+        f"{outcome.wall_s / 60:.1f} min; wrote {plan.out_dir / 'summary.md'}"
+    )

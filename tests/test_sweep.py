@@ -1,0 +1,249 @@
+"""socnav-wm sweep: the grid, its one-line errors, and real sweeps on a local Ray (2 CPUs) with a
+real MLflow store: weights equal to the serial train-agent's, a failed run that does not stop the
+others, finished runs skipped, an interrupted sweep that resumes from its checkpoints."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+import torch
+import yaml
+from typer.testing import CliRunner
+
+from pipeline.cli import app
+from pipeline.config import ConfigError, StudyParams, load_params
+from pipeline.sweep import parse_grid, parse_seeds, plan_sweep, study_from_options
+from pipeline.worldmodel.training import save_lstm, save_vae
+from tests.agents.conftest import tiny_world_model
+from tests.conftest import tiny_params
+
+runner = CliRunner()
+
+
+@pytest.fixture
+def sweepdir(workdir: Path) -> Path:
+    """The tiny working directory with a tiny world model at the pipeline's paths."""
+    vae, lstm = tiny_world_model()
+    (workdir / "models").mkdir()
+    save_vae(workdir / "models" / "vae.pt", vae)
+    save_lstm(workdir / "models" / "lstm.pt", lstm)
+    return workdir
+
+
+def _invoke(*args: str):
+    return runner.invoke(app, list(args), catch_exceptions=False)
+
+
+def _weights(path: Path) -> dict[str, torch.Tensor]:
+    from pipeline.agents.agent_file import load_agent
+
+    return load_agent(path).q_network.state_dict()
+
+
+# ------------------------------------------------------------------------------- the grid
+
+
+def test_seeds_and_grid_parse_like_the_command_line() -> None:
+    assert parse_seeds("0-4") == [0, 1, 2, 3, 4]
+    assert parse_seeds("0,2,7") == [0, 2, 7]
+    assert parse_seeds("1-2,5") == [1, 2, 5]
+    assert parse_grid(["agent.horizon=2,4", "agent.sort_humans=true,false"]) == {
+        "agent.horizon": [2, 4],
+        "agent.sort_humans": [True, False],
+    }
+    for bad in ("4-0", "a", "0,0", ""):
+        with pytest.raises(ConfigError, match="--seeds"):
+            parse_seeds(bad)
+    for bad in (["agent.horizon"], ["=2"], ["agent.horizon=2", "agent.horizon=4"]):
+        with pytest.raises(ConfigError, match="--grid"):
+            parse_grid(bad)
+
+
+def test_a_study_is_validated_like_every_section(tmp_path: Path) -> None:
+    path = tmp_path / "params.yaml"
+    for text, message in (
+        ("studies: {s: {variants: [dqn], seeds: [0]}}", "unknown 'dqn'"),
+        ("studies: {s: {variants: [maspm], seeds: 3-1}}", "a range like '0-4'"),
+        ("studies: {s: {variants: [maspm], seeds: [0], grid: {agent.gamma: []}}}", "no values"),
+        ("studies: {s: {variants: [maspm], seeds: [0], gird: {}}}", "studies.s.gird"),
+    ):
+        path.write_text(text + "\n")
+        with pytest.raises(ConfigError, match=message):
+            load_params(path)
+    path.write_text("studies: {s: {variants: [maspm], seeds: 0-2}}\n")
+    assert load_params(path).studies["s"].seeds == [0, 1, 2]
+
+
+def test_the_shipped_studies_resolve_every_run(sweepdir: Path) -> None:
+    params = load_params("params.yaml")
+    horizon = plan_sweep("horizon", params.studies["horizon"])
+    assert len(horizon.runs) == 2 * 4 * 5
+    assert {p.agent.horizon for p in horizon.params.values()} == {2, 4, 8, 16}
+    assert len(set(horizon.fingerprints.values())) == len(horizon.runs)
+    assert horizon.runs_dir == Path("data/studies/horizon")
+    assert len(plan_sweep("seeds", params.studies["seeds"]).runs) == 5 * 5
+
+
+def test_a_bad_grid_fails_in_one_line_before_any_run(sweepdir: Path) -> None:
+    study = StudyParams(variants=["maspm"], seeds=[0], grid={"agent.horizn": [2]})
+    with pytest.raises(ConfigError, match=r"sweep s, run maspm/agent\.horizn=2/seed-0: .*horizn"):
+        plan_sweep("s", study)
+    study = StudyParams(variants=["maspm"], seeds=[0], grid={"agent.horizon": [0]})
+    with pytest.raises(ConfigError, match="agent.horizon"):
+        plan_sweep("s", study)
+    with pytest.raises(FileNotFoundError, match="no such world-model file"):
+        plan_sweep("s", study, vae=Path("nowhere.pt"))
+    with pytest.raises(ConfigError, match="--variants: required without --study"):
+        study_from_options(None, None, "0", [])
+    result = runner.invoke(app, ["sweep", "--study", "nope"])
+    assert result.exit_code == 2 and "no study 'nope' in params.yaml" in result.output
+    result = runner.invoke(app, ["sweep", "--variants", "maspm", "--seeds", "0"])
+    assert result.exit_code == 2 and "--name: required without --study" in result.output
+
+
+def test_without_ray_a_sweep_fails_in_one_line(
+    sweepdir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
+    args = ["sweep", "--variants", "dueling-dqn", "--seeds", "0", "--name", "t", "--no-tracking"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines()[-1] == (
+        "error: socnav-wm sweep needs Ray, which is not installed: pip install 'socnav-wm[sweep]'"
+    )
+
+
+def test_other_commands_do_not_import_ray() -> None:
+    code = "import sys, pipeline.cli, pipeline.sweep; print('ray' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+# ------------------------------------------------------------------------------- real sweeps
+
+
+def test_a_sweep_on_local_ray_equals_the_serial_runs_and_survives_a_failure(
+    sweepdir: Path,
+) -> None:
+    from mlflow import MlflowClient
+
+    args = [
+        "sweep", "--variants", "dueling-dqn,2stepahead", "--seeds", "0-1",
+        "--grid", "agent.gamma=0.9,0.99", "--name", "tiny", "--cpus", "2",
+    ]  # fmt: skip
+    # One run cannot write its folder (a file is in the way): it fails, the others go on.
+    blocked = Path("data/studies/tiny/2stepahead__agent.gamma=0.99__seed-1")
+    blocked.parent.mkdir(parents=True)
+    blocked.write_text("in the way")
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert "1 of 8 runs failed (first: 2stepahead/agent.gamma=0.99/seed-1" in result.output
+
+    table = pq.read_table("reports/studies/tiny/results.parquet").to_pylist()
+    assert len(table) == 8
+    by_run = {row["run"]: row for row in table}
+    assert by_run["2stepahead/agent.gamma=0.99/seed-1"]["status"] == "failed"
+    assert by_run["2stepahead/agent.gamma=0.99/seed-1"]["error"]
+    assert {row["agent.gamma"] for row in table} == {"0.9", "0.99"}
+    done = [row for row in table if row["status"] == "done"]
+    assert len(done) == 7 and all(0.0 <= row["success"] <= 1.0 for row in done)
+    summary = Path("reports/studies/tiny/summary.md").read_text()
+    assert "7 of 8 runs finished, 1 failed" in summary
+    assert "| dueling-dqn | 0.9 | 2 |" in summary and "| 2stepahead | 0.99 | 1 |" in summary
+    assert Path("reports/studies/tiny/figures/agent.gamma.png").stat().st_size > 1000
+
+    # Each run is exactly train-agent with its --set values: the same weights, bit for bit.
+    for variant, seed, gamma in (("dueling-dqn", 1, "0.9"), ("2stepahead", 0, "0.99")):
+        _invoke(
+            "train-agent", "--variant", variant, "--seed", str(seed), "--set",
+            f"agent.gamma={gamma}", "--out-dir", "serial", "--no-tracking", "--quiet",
+        )  # fmt: skip
+        swept = Path(f"data/studies/tiny/{variant}__agent.gamma={gamma}__seed-{seed}")
+        ours = _weights(swept / "agents" / variant / f"seed-{seed}.pt")
+        serial = _weights(Path("serial") / variant / f"seed-{seed}.pt")
+        assert ours.keys() == serial.keys()
+        for key in ours:
+            assert torch.equal(ours[key], serial[key]), (variant, key)
+
+    # One MLflow parent run for the sweep, a child per run tagged with its grid values, and the
+    # run's training and evaluation nested under the child.
+    client = MlflowClient()
+    experiment = client.get_experiment_by_name("socnav-wm").experiment_id
+    runs = client.search_runs([experiment], max_results=500)
+    parents = [r for r in runs if r.info.run_name == "sweep/tiny"]
+    assert len(parents) == 1
+    children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == parents[0].info.run_id]
+    assert len(children) == 8
+    child = next(
+        r for r in children if r.info.run_name == "sweep-run/dueling-dqn/agent.gamma=0.9/seed-1"
+    )
+    assert child.data.tags["grid.agent.gamma"] == "0.9" and child.info.status == "FINISHED"
+    assert "success" in child.data.metrics
+    nested = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == child.info.run_id]
+    assert sorted(r.info.run_name for r in nested) == [
+        "evaluate/dueling-dqn",
+        "train-agent/dueling-dqn/seed-1",
+    ]
+    failed = next(r for r in children if r.info.run_name.endswith("gamma=0.99/seed-1")
+                  and "2stepahead" in r.info.run_name)  # fmt: skip
+    assert failed.info.status == "FAILED"
+
+    # Started again: the finished runs are skipped, the failed one runs (and now succeeds).
+    blocked.unlink()
+    result = runner.invoke(app, [*args, "--no-tracking"])
+    assert result.exit_code == 0, result.output
+    assert "7 already finished, 1 to run" in result.output
+    assert "8/8 runs done (7 skipped as finished, 0 failed)" in result.output
+    # Started once more: nothing to run, and Ray is not even started.
+    result = runner.invoke(app, [*args, "--no-tracking"])
+    assert "8 already finished, 0 to run" in result.output
+
+
+def test_an_interrupted_sweep_resumes_from_its_checkpoints(sweepdir: Path) -> None:
+    params = tiny_params()
+    params["agent"].update(episodes=120, checkpoint_every=4)
+    Path("params.yaml").write_text(yaml.safe_dump(params))
+    command = [
+        sys.executable, "-m", "pipeline.cli", "sweep", "--variants", "dueling-dqn",
+        "--seeds", "0-1", "--name", "cut", "--cpus", "2", "--no-tracking",
+    ]  # fmt: skip
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    sweep = subprocess.Popen(command, env=env, stderr=subprocess.PIPE, text=True)
+    checkpoints = Path("data/studies/cut/checkpoints")
+    deadline = time.monotonic() + 240
+    while not list(checkpoints.rglob("*.ckpt")) and time.monotonic() < deadline:
+        assert sweep.poll() is None, sweep.stderr.read() if sweep.stderr else ""
+        time.sleep(0.2)
+    assert list(checkpoints.rglob("*.ckpt")), "no checkpoint was written"
+    sweep.send_signal(signal.SIGTERM)  # what Ctrl-C, kill or a scheduler does
+    _, err = sweep.communicate(timeout=120)
+    assert sweep.returncode != 0, err
+    assert not list(Path("data/studies/cut").rglob("result.json"))  # nothing finished
+
+    result = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    results = [json.loads(p.read_text()) for p in Path("data/studies/cut").rglob("result.json")]
+    assert len(results) == 2 and all(r["status"] == "done" for r in results)
+    assert any(r["resumed"] for r in results)
+    # Exact resume: the resumed run's weights are those of one uninterrupted training.
+    resumed = next(r for r in results if r["resumed"])
+    subprocess.run(
+        [sys.executable, "-m", "pipeline.cli", "train-agent", "--variant", "dueling-dqn",
+         "--seed", str(resumed["seed"]), "--out-dir", "serial", "--no-tracking", "--quiet"],
+        env=env, check=True, capture_output=True,
+    )  # fmt: skip
+    slug = f"dueling-dqn__seed-{resumed['seed']}"
+    ours = _weights(
+        Path("data/studies/cut") / slug / "agents/dueling-dqn" / f"seed-{resumed['seed']}.pt"
+    )
+    serial = _weights(Path("serial/dueling-dqn") / f"seed-{resumed['seed']}.pt")
+    for key in ours:
+        assert torch.equal(ours[key], serial[key]), key
