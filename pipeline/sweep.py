@@ -355,11 +355,20 @@ def _execute(job: RunJob, started: float, cpu_started: float) -> dict[str, Any]:
         "grid": {key: value for key, value in spec.values},
         "metrics": metrics,
         "resumed": resumed,
+        "node": _ray_node(),
         "wall_s": time.time() - started,
         "cpu_s": time.process_time() - cpu_started,
     }
     write_json_atomic(run_dir / RESULT_FILE, result)
     return result
+
+
+def _ray_node() -> str | None:
+    """The Ray node this runs on (None outside a Ray task)."""
+    ray = sys.modules.get("ray")
+    if ray is None or not ray.is_initialized():
+        return None
+    return ray.get_runtime_context().get_node_id()
 
 
 def _run_metrics(run_dir: Path, spec: RunSpec) -> dict[str, float]:
@@ -537,20 +546,26 @@ def _run_tasks(
 # ---------------------------------------------------------------------------------------------
 
 
-def _interval(values: Sequence[float]) -> tuple[float, float, float]:
-    """Mean and 95% Student-t interval over seeds (NaN bounds for one seed)."""
+def _is_rate(name: str) -> bool:
+    return name in ("success", "human_collision", "wall_collision") or name.endswith("_rate")
+
+
+def _interval(values: Sequence[float], name: str) -> tuple[float, float, float]:
+    """Mean and 95% Student-t interval over seeds (NaN bounds for one seed), cut to the
+    metric's range: every summary metric is non-negative, and a rate is at most 1."""
+    import statistics
+
     from scipy import stats
 
     values = [v for v in values if not math.isnan(v)]
     n = len(values)
     if n == 0:
         return math.nan, math.nan, math.nan
-    mean = float(sum(values) / n)
+    mean = float(statistics.fmean(values))
     if n < 2:
         return mean, math.nan, math.nan
-    sd = float(stats.tstd(values))
-    half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
-    return mean, mean - half, mean + half
+    half = float(stats.t.ppf(0.975, n - 1)) * statistics.stdev(values) / math.sqrt(n)
+    return mean, max(mean - half, 0.0), min(mean + half, 1.0) if _is_rate(name) else mean + half
 
 
 def _groups(outcome: SweepResult) -> dict[tuple[str, tuple[Any, ...]], list[dict[str, Any]]]:
@@ -590,6 +605,7 @@ def write_results(outcome: SweepResult) -> list[Path]:
     columns["status"] = [res.get("status", "not run") for _, res, _ in rows]
     columns["error"] = [res.get("error") for _, res, _ in rows]
     columns["resumed"] = [res.get("resumed") for _, res, _ in rows]
+    columns["node"] = [res.get("node") for _, res, _ in rows]
     columns["wall_s"] = [res.get("wall_s") for _, res, _ in rows]
     for name in metric_names:
         columns[name] = [m.get(name) for _, _, m in rows]
@@ -617,7 +633,7 @@ def _present_metrics(groups: Mapping[Any, list[dict[str, Any]]]) -> list[str]:
 def _fmt(value: float, name: str) -> str:
     if math.isnan(value):
         return "–"
-    if name in ("success", "human_collision", "wall_collision") or name.endswith("_rate"):
+    if _is_rate(name):
         return f"{value:.1%}"
     return f"{value:.3g}"
 
@@ -651,7 +667,7 @@ def _summary(outcome: SweepResult) -> str:
         cells = [variant, *map(_format_value, values), str(len(results))]
         for metric in metrics:
             vals = [r["metrics"][metric] for r in results if metric in r["metrics"]]
-            mean, low, high = _interval(vals)
+            mean, low, high = _interval(vals, metric)
             cell = _fmt(mean, metric)
             if not math.isnan(low):
                 cell += f" [{_fmt(low, metric)}, {_fmt(high, metric)}]"
@@ -704,7 +720,7 @@ def _figures(outcome: SweepResult) -> list[Path]:
                     ]
                     if not vals:
                         continue
-                    mean, low, high = _interval(vals)
+                    mean, low, high = _interval(vals, metric)
                     xs.append(value if numeric else position)
                     means.append(mean)
                     lows.append(mean if math.isnan(low) else low)

@@ -5,6 +5,7 @@ others, finished runs skipped, an interrupted sweep that resumes from its checkp
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -20,7 +21,7 @@ from typer.testing import CliRunner
 
 from pipeline.cli import app
 from pipeline.config import ConfigError, StudyParams, load_params
-from pipeline.sweep import parse_grid, parse_seeds, plan_sweep, study_from_options
+from pipeline.sweep import _interval, parse_grid, parse_seeds, plan_sweep, study_from_options
 from pipeline.worldmodel.training import save_lstm, save_vae
 from tests.agents.conftest import tiny_world_model
 from tests.conftest import tiny_params
@@ -65,6 +66,16 @@ def test_seeds_and_grid_parse_like_the_command_line() -> None:
     for bad in (["agent.horizon"], ["=2"], ["agent.horizon=2", "agent.horizon=4"]):
         with pytest.raises(ConfigError, match="--grid"):
             parse_grid(bad)
+
+
+def test_intervals_over_seeds_stay_in_the_metric_range() -> None:
+    mean, low, high = _interval([0.0, 1.0], "success")
+    assert (mean, low, high) == (0.5, 0.0, 1.0)  # the t interval itself is far wider
+    mean, low, high = _interval([10.0, 11.0, 12.0], "discomfort")  # t(0.975, 2) = 4.3027
+    assert (low, high) == pytest.approx((11 - 4.302653 / 3**0.5, 11 + 4.302653 / 3**0.5))
+    assert _interval([10.0, 30.0], "discomfort")[1] == 0.0  # never below zero
+    assert _interval([3.0, 3.0], "train_cpu_s") == (3.0, 3.0, 3.0)
+    assert all(math.isnan(bound) for bound in _interval([0.5], "success")[1:])  # one seed
 
 
 def test_a_study_is_validated_like_every_section(tmp_path: Path) -> None:
@@ -155,6 +166,7 @@ def test_a_sweep_on_local_ray_equals_the_serial_runs_and_survives_a_failure(
     assert {row["agent.gamma"] for row in table} == {"0.9", "0.99"}
     done = [row for row in table if row["status"] == "done"]
     assert len(done) == 7 and all(0.0 <= row["success"] <= 1.0 for row in done)
+    assert all(row["node"] for row in done)  # the Ray node each ran on
     summary = Path("reports/studies/tiny/summary.md").read_text()
     assert "7 of 8 runs finished, 1 failed" in summary
     assert "| dueling-dqn | 0.9 | 2 |" in summary and "| 2stepahead | 0.99 | 1 |" in summary
