@@ -31,6 +31,7 @@ import json
 import math
 import os
 import re
+import statistics
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -553,8 +554,6 @@ def _is_rate(name: str) -> bool:
 def _interval(values: Sequence[float], name: str) -> tuple[float, float, float]:
     """Mean and 95% Student-t interval over seeds (NaN bounds for one seed), cut to the
     metric's range: every summary metric is non-negative, and a rate is at most 1."""
-    import statistics
-
     from scipy import stats
 
     values = [v for v in values if not math.isnan(v)]
@@ -621,7 +620,12 @@ def write_results(outcome: SweepResult) -> list[Path]:
         pq.write_table(table, tmp)
     summary_path = plan.out_dir / "summary.md"
     write_text_atomic(summary_path, _summary(outcome))
-    return [results_path, summary_path, *_figures(outcome)]
+    written = [results_path, summary_path]
+    verdict = horizon_verdict(outcome)
+    if verdict is not None:  # for machines: the claim, each comparison, the verdict
+        written.append(plan.out_dir / "claims.json")
+        write_text_atomic(written[-1], json.dumps(verdict, indent=2) + "\n")
+    return [*written, *_figures(outcome)]
 
 
 def _present_metrics(groups: Mapping[Any, list[dict[str, Any]]]) -> list[str]:
@@ -676,8 +680,83 @@ def _summary(outcome: SweepResult) -> str:
     if outcome.failed:
         lines += ["", "Failed runs:", ""]
         lines += [f"- `{r['run']}`: {r.get('error', '')}" for r in outcome.failed]
+    verdict = horizon_verdict(outcome)
+    if verdict is not None:
+        lines += ["", "## The paper's horizon claim", "", f"> {HORIZON_CLAIM}", ""]
+        lines += [*verdict["comparisons"], "", f"**Verdict: {verdict['verdict']}.**"]
     lines += ["", *[f"![{key}](figures/{_figure_name(key)})" for key in plan.grid_keys]]
     return "\n".join(lines).rstrip() + "\n"
+
+
+HORIZON_CLAIM = (
+    "predicting more than 2 steps ahead did not improve the results in our SocNavGym setup and "
+    "made training slower (the paper, section 3.1)"
+)
+
+
+def horizon_verdict(outcome: SweepResult, alpha: float = 0.05) -> dict[str, Any] | None:
+    """The paper's horizon claim checked on a study whose only grid key is ``agent.horizon``
+    with 2 among its values (None for any other study): for each variant and each horizon above
+    2, a paired t-test over the seeds that finished both, on test success and on the training's
+    CPU seconds. The claim holds when no longer horizon has a higher success (p < ``alpha``)
+    and every one trains slower (p < ``alpha``); it fails when a longer horizon succeeds more
+    or trains faster; otherwise the seeds do not decide it."""
+    from scipy import stats
+
+    plan = outcome.plan
+    if plan.grid_keys != ["agent.horizon"] or 2 not in plan.study.grid["agent.horizon"]:
+        return None
+    by_point: dict[tuple[str, Any], dict[int, dict[str, float]]] = {}
+    for run in plan.runs:
+        result = outcome.results.get(run)
+        if result and result.get("status") == "done":
+            by_point.setdefault((run.variant, run.values[0][1]), {})[run.seed] = result["metrics"]
+    lines, better, faster, undecided = [], [], [], []
+    for variant in plan.study.variants:
+        base = by_point.get((variant, 2), {})
+        for horizon in plan.study.grid["agent.horizon"]:
+            if horizon <= 2:
+                continue
+            other = by_point.get((variant, horizon), {})
+            seeds = sorted(set(base) & set(other))
+            line = f"- `{variant}`, horizon {horizon} against 2, {len(seeds)} paired seeds:"
+            where = f"{variant} at {horizon}"
+            if len(seeds) < 2:
+                lines.append(f"{line} too few to test.")
+                undecided.append(where)
+                continue
+            parts = []
+            for metric, label in (("success", "success"), ("train_cpu_s", "training CPU s")):
+                diffs = [other[s][metric] - base[s][metric] for s in seeds]
+                diff = statistics.fmean(diffs)
+                if statistics.stdev(diffs) > 0:
+                    p = float(stats.ttest_1samp(diffs, 0.0).pvalue)  # the paired t-test
+                else:  # the same difference on every seed
+                    p = 1.0 if diff == 0 else 0.0
+                shown = f"{diff:+.1%}" if metric == "success" else f"{diff:+.0f}"
+                parts.append(f"{label} {shown} (p = {p:.3f})")
+                significant = p < alpha
+                if metric == "success" and significant and diff > 0:
+                    better.append(where)
+                if metric == "train_cpu_s":
+                    if significant and diff < 0:
+                        faster.append(where)
+                    elif not (significant and diff > 0):
+                        undecided.append(where)
+            lines.append(f"{line} {'; '.join(parts)}.")
+    if better or faster:
+        verdict = (
+            "does not hold ("
+            + ", ".join(
+                [*(f"{w} succeeds more" for w in better), *(f"{w} trains faster" for w in faster)]
+            )
+            + ")"
+        )
+    elif undecided:
+        verdict = "not decided by these seeds (" + ", ".join(sorted(set(undecided))) + ")"
+    else:
+        verdict = "holds: no horizon above 2 succeeds more, and every one trains slower"
+    return {"claim": HORIZON_CLAIM, "comparisons": lines, "verdict": verdict}
 
 
 def _figure_name(key: str) -> str:

@@ -21,7 +21,15 @@ from typer.testing import CliRunner
 
 from pipeline.cli import app
 from pipeline.config import ConfigError, StudyParams, load_params
-from pipeline.sweep import _interval, parse_grid, parse_seeds, plan_sweep, study_from_options
+from pipeline.sweep import (
+    SweepResult,
+    _interval,
+    horizon_verdict,
+    parse_grid,
+    parse_seeds,
+    plan_sweep,
+    study_from_options,
+)
 from pipeline.worldmodel.training import save_lstm, save_vae
 from tests.agents.conftest import tiny_world_model
 from tests.conftest import tiny_params
@@ -76,6 +84,33 @@ def test_intervals_over_seeds_stay_in_the_metric_range() -> None:
     assert _interval([10.0, 30.0], "discomfort")[1] == 0.0  # never below zero
     assert _interval([3.0, 3.0], "train_cpu_s") == (3.0, 3.0, 3.0)
     assert all(math.isnan(bound) for bound in _interval([0.5], "success")[1:])  # one seed
+
+
+def test_the_horizon_claim_is_checked_on_paired_seeds(sweepdir: Path) -> None:
+    study = StudyParams(variants=["2stepahead"], seeds=[0, 1, 2], grid={"agent.horizon": [2, 8]})
+    plan = plan_sweep("h", study)
+
+    def verdict(success_gain: list[float], cpu_gain: list[float]) -> str:
+        outcome = SweepResult(plan)
+        for run in plan.runs:
+            longer = run.values[0][1] == 8
+            metrics = {
+                "success": 0.8 + (success_gain[run.seed] if longer else 0.0),
+                "train_cpu_s": 300.0 + (cpu_gain[run.seed] if longer else 0.0),
+            }
+            outcome.results[run] = {"status": "done", "metrics": metrics}
+        result = horizon_verdict(outcome)
+        assert result is not None and len(result["comparisons"]) == 1
+        return result["verdict"]
+
+    assert verdict([0.0, -0.01, 0.01], [100, 110, 120]).startswith("holds")
+    assert verdict([0.10, 0.11, 0.12], [100, 110, 120]).startswith(
+        "does not hold (2stepahead at 8 succeeds more"
+    )
+    assert verdict([0.0, 0.0, 0.0], [-50, 40, 5]).startswith("not decided")
+    # Not a horizon study: no verdict.
+    other = plan_sweep("g", StudyParams(variants=["maspm"], seeds=[0], grid={"agent.gamma": [0.9]}))
+    assert horizon_verdict(SweepResult(other)) is None
 
 
 def test_a_study_is_validated_like_every_section(tmp_path: Path) -> None:
