@@ -37,14 +37,16 @@ run:
 
 # `dvc repro` with the agent trainings and the evaluations in parallel (with whatever `dvc` is
 # on PATH). DVC runs one stage at a time, and the trainings (the agents and the planning models:
-# independent stages, minutes each on one core) are most of the pipeline's time, so they run first as JOBS `dvc repro --single-item`
-# processes: DVC releases its repository lock while a stage's command runs, and --wait-for-lock
-# queues the jobs' short bookkeeping (hashing, dvc.lock). The world-model variants, the longest
-# trainings, start first and the dueling-dqn ones fill the end, so that the last job to finish
-# is a short one. The evaluations follow the same way, and the final `dvc repro` runs the rest
-# (the report) and finds everything else up to date. A training's numbers do not depend on its
-# thread count or on the order. JOBS=1 gives the plain sequential `dvc repro report`. The
-# studies (studies/dvc.yaml: grids of agent runs, hours on two cores) are not part of it.
+# independent stages, minutes each on one core) are most of the pipeline's time, so they run
+# first as JOBS `dvc repro --single-item` processes: DVC releases its repository lock while a
+# stage's command runs, and --wait-for-lock queues the jobs' short bookkeeping (hashing,
+# dvc.lock). The world-model variants, the longest trainings, start first and the dueling-dqn
+# ones fill the end, so that the last job to finish is a short one. The evaluations follow the
+# same way, and the final `dvc repro` runs the rest (the report) and finds everything else up to
+# date. A training's numbers do not depend on the order; the world-model variants' can differ in
+# the last bits with THREADS (float32 sums), and dvc.lock's were made with THREADS=1. JOBS=1
+# gives the plain sequential `dvc repro report`. The studies (studies/dvc.yaml: grids of agent
+# runs, hours on two cores) are not part of it.
 PARALLEL = OMP_NUM_THREADS=$(THREADS) xargs -n 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
 
 repro:
