@@ -40,19 +40,23 @@ run:
 # independent stages, minutes each on one core) are most of the pipeline's time, so they run
 # first as JOBS `dvc repro --single-item` processes: DVC releases its repository lock while a
 # stage's command runs, and --wait-for-lock queues the jobs' short bookkeeping (hashing,
-# dvc.lock). The world-model variants, the longest trainings, start first and the dueling-dqn
-# ones fill the end, so that the last job to finish is a short one. The evaluations follow the
-# same way, and the final `dvc repro` runs the rest (the report) and finds everything else up to
-# date. A training's numbers do not depend on the order; the world-model variants' can differ in
-# the last bits with THREADS (float32 sums), and dvc.lock's were made with THREADS=1. JOBS=1
-# gives the plain sequential `dvc repro report`. The studies (studies/dvc.yaml: grids of agent
-# runs, hours on two cores) are not part of it.
+# dvc.lock). vae-lstm-mpc's evaluation (the longest stage, over an hour of one core, needing only
+# the world model) starts first, then the world-model variants, the longest trainings; the
+# dueling-dqn ones fill the end, so that the last job to finish is a short one. The other
+# evaluations follow the same way, and the final `dvc repro` runs the rest (the report) and
+# finds everything else up to date. A training's numbers do not depend on the order; the
+# world-model variants' can differ in the last bits with THREADS (float32 sums), and dvc.lock's
+# were made with THREADS=1. JOBS=1 gives the plain sequential `dvc repro report`. The studies
+# (studies/dvc.yaml: grids of agent runs, hours on two cores) are not part of it.
 PARALLEL = OMP_NUM_THREADS=$(THREADS) xargs -n 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
 
 repro:
 	dvc repro train_lstm
-	dvc stage list --name-only | grep -E '^(train_planning_model|train_agent)@' \
-		| awk '/@dueling-dqn-/ { short = short $$0 "\n"; next } { print } END { printf "%s", short }' \
+	dvc stage list --name-only \
+		| grep -E '^(train_planning_model@|train_agent@|evaluate_vae_lstm_mpc$$)' \
+		| awk '/^evaluate_vae_lstm_mpc$$/ { first = $$0 "\n"; next } \
+			/@dueling-dqn-/ { short = short $$0 "\n"; next } { rest = rest $$0 "\n" } \
+			END { printf "%s%s%s", first, rest, short }' \
 		| $(PARALLEL)
 	dvc stage list --name-only | grep '^evaluate' | $(PARALLEL)
 	dvc repro report
