@@ -25,10 +25,10 @@ def test_no_history_in_the_text(document: Path) -> None:
 
 @pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
 def test_relative_links_point_to_files(document: Path) -> None:
-    """Links to files of the repository exist (docs/cluster.md may be written elsewhere)."""
+    """Links to files of the repository exist."""
     text = document.read_text(encoding="utf-8")
     for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text):
-        if "://" in target or target.endswith("cluster.md"):
+        if "://" in target:
             continue
         assert (document.parent / target).exists(), f"{document.name}: {target}"
 
