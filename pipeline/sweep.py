@@ -662,9 +662,7 @@ def _summary(outcome: SweepResult) -> str:
         "seeds] (Student t; – with one seed).",
         "",
     ]
-    metrics = [
-        m for m in SUMMARY_METRICS if any(m in r["metrics"] for g in groups.values() for r in g)
-    ]
+    metrics = _present_metrics(groups)
     header = ["variant", *[f"`{k}`" for k in plan.grid_keys], "seeds", *metrics]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for (variant, values), results in groups.items():
@@ -777,9 +775,7 @@ def _figures(outcome: SweepResult) -> list[Path]:
     from pipeline.io import atomic_path
 
     groups = _groups(outcome)
-    metrics = [
-        m for m in SUMMARY_METRICS if any(m in r["metrics"] for g in groups.values() for r in g)
-    ]
+    metrics = _present_metrics(groups)
     paths = []
     (plan.out_dir / "figures").mkdir(parents=True, exist_ok=True)
     for index, key in enumerate(plan.grid_keys):
