@@ -619,9 +619,9 @@ def write_results(outcome: SweepResult) -> list[Path]:
     with atomic_path(results_path) as tmp:
         pq.write_table(table, tmp)
     summary_path = plan.out_dir / "summary.md"
-    write_text_atomic(summary_path, _summary(outcome))
-    written = [results_path, summary_path]
     verdict = horizon_verdict(outcome)
+    write_text_atomic(summary_path, _summary(outcome, verdict))
+    written = [results_path, summary_path]
     if verdict is not None:  # for machines: the claim, each comparison, the verdict
         written.append(plan.out_dir / "claims.json")
         write_text_atomic(written[-1], json.dumps(verdict, indent=2) + "\n")
@@ -642,7 +642,7 @@ def _fmt(value: float, name: str) -> str:
     return f"{value:.3g}"
 
 
-def _summary(outcome: SweepResult) -> str:
+def _summary(outcome: SweepResult, verdict: dict[str, Any] | None) -> str:
     plan = outcome.plan
     groups = _groups(outcome)
     done = sum(len(v) for v in groups.values())
@@ -678,7 +678,6 @@ def _summary(outcome: SweepResult) -> str:
     if outcome.failed:
         lines += ["", "Failed runs:", ""]
         lines += [f"- `{r['run']}`: {r.get('error', '')}" for r in outcome.failed]
-    verdict = horizon_verdict(outcome)
     if verdict is not None:
         lines += ["", "## The paper's horizon claim", "", f"> {HORIZON_CLAIM}", ""]
         lines += [*verdict["comparisons"], "", f"**Verdict: {verdict['verdict']}.**"]
