@@ -242,6 +242,18 @@ class Run:
     def log_text(self, text: str, name: str) -> None:
         """Save ``text`` as the artifact ``name``."""
 
+    def log_model(
+        self,
+        module: Any,
+        inputs: Mapping[str, Any],
+        outputs: Mapping[str, Any],
+        name: str = "model",
+    ) -> None:
+        """Save a torch module in MLflow's PyTorch format as the artifact folder ``name``
+        (``mlflow.pytorch.load_model("runs:/<run id>/model")`` loads it back), with the signature
+        of the example ``inputs`` and ``outputs`` (numpy arrays by name: dtypes, and shapes
+        whose first dimension, the batch, may vary)."""
+
     def set_tag(self, key: str, value: Any) -> None:
         """Set a run tag."""
 
@@ -303,6 +315,32 @@ class _MlflowRun(Run):
 
     def log_text(self, text: str, name: str) -> None:
         self._client.log_text(self.run_id, text, name)
+
+    def log_model(
+        self,
+        module: Any,
+        inputs: Mapping[str, Any],
+        outputs: Mapping[str, Any],
+        name: str = "model",
+    ) -> None:
+        import tempfile
+
+        import mlflow.pytorch
+        import torch
+        from mlflow.models import infer_signature
+
+        signature = infer_signature(dict(inputs), dict(outputs))
+        with tempfile.TemporaryDirectory() as tmp:
+            local = Path(tmp) / name
+            # The requirement is given: inferring it would load the model in a subprocess.
+            mlflow.pytorch.save_model(
+                module,
+                str(local),
+                signature=signature,
+                serialization_format="pickle",  # the nn.Module itself, as load_model returns it
+                pip_requirements=[f"torch=={torch.__version__.split('+')[0]}"],
+            )
+            self._client.log_artifacts(self.run_id, str(local), name)
 
     def set_tag(self, key: str, value: Any) -> None:
         self._client.set_tag(self.run_id, key, _truncate(str(value), _MAX_TAG_VALUE))

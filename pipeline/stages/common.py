@@ -3,12 +3,14 @@ those params beside its outputs, and log per-epoch or per-episode curves."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import copy
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from pipeline.config import STAGE_SECTIONS, Params, params_dict, save_resolved, select_sections
 from pipeline.io import outputs_together, write_json_atomic
@@ -97,3 +99,25 @@ def world_model_outputs(
     run.log_metrics({key: value for key, value in summary.items() if key not in per_epoch})
     run.log_artifact(model)
     run.log_artifact(config_path(model))
+
+
+def log_torch_model(
+    run: Run,
+    module: torch.nn.Module,
+    inputs: Mapping[str, torch.Tensor],
+    output_names: Sequence[str],
+) -> None:
+    """Log a CPU copy of ``module`` in MLflow's PyTorch format (the run's ``model`` artifact),
+    with the signature of ``module(*inputs.values())``: the example ``inputs`` by name, and the
+    outputs (a tensor, or the first elements of a tuple) named ``output_names``."""
+    if run.run_id is None:  # tracking is off
+        return
+    model = copy.deepcopy(module).cpu().eval()
+    with torch.no_grad():
+        out = model(*inputs.values())
+    out = out if isinstance(out, tuple) else (out,)
+    run.log_model(
+        model,
+        {name: tensor.cpu().numpy() for name, tensor in inputs.items()},
+        {name: tensor.numpy() for name, tensor in zip(output_names, out, strict=False)},
+    )

@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import torch
+
 from pipeline.agents.agent_file import agent_from_result, greedy_episodes, save_agent
 from pipeline.agents.checkpoint import checkpoint_file, run_identity
 from pipeline.agents.params import check_variant
@@ -16,7 +18,13 @@ from pipeline.agents.training import (
 )
 from pipeline.config import Params
 from pipeline.io import check_writable, outputs_together, write_json_atomic
-from pipeline.stages.common import config_path, open_stage, save_stage_params, training_logger
+from pipeline.stages.common import (
+    config_path,
+    log_torch_model,
+    open_stage,
+    save_stage_params,
+    training_logger,
+)
 
 
 def run(
@@ -84,6 +92,9 @@ def run(
             )
         run.log_artifact(out)
         run.log_artifact(config_path(out))
+        q = result.q_network
+        features = torch.zeros(1, q.input_dim, dtype=next(q.parameters()).dtype)
+        log_torch_model(run, q, {"features": features}, ("q_values",))
         if not keep_checkpoint:
             checkpoint.unlink(missing_ok=True)
     solved = summary["episodes_to_solve"]

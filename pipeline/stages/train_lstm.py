@@ -5,10 +5,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from pipeline.config import Params
 from pipeline.io import check_writable
 from pipeline.progress import progress
-from pipeline.stages.common import config_path, epoch_logger, open_stage, world_model_outputs
+from pipeline.stages.common import (
+    config_path,
+    epoch_logger,
+    log_torch_model,
+    open_stage,
+    world_model_outputs,
+)
 from pipeline.worldmodel.fit import fit_lstm
 from pipeline.worldmodel.training import save_lstm
 
@@ -43,6 +51,11 @@ def run(
             out, metrics, history, summary, result.history,
         )  # fmt: skip
         run.log_figure(fitted.figure(), "figures/latent_predictions.png")
+        lstm = result.model
+        seq = params.lstm.seq_len
+        z = torch.zeros(1, seq, lstm.latent_dim, dtype=lstm.head.weight.dtype)
+        actions = torch.zeros(1, seq, dtype=torch.int64)
+        log_torch_model(run, lstm, {"z": z, "actions": actions}, ("z_next",))
     m = fitted.metrics
     return (
         f"wrote {out}: 1-step latent MSE {m['one_step_mse']:.4g} "

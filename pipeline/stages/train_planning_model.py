@@ -6,10 +6,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from pipeline.config import Params
 from pipeline.io import check_writable
 from pipeline.progress import progress
-from pipeline.stages.common import config_path, epoch_logger, open_stage, world_model_outputs
+from pipeline.stages.common import (
+    config_path,
+    epoch_logger,
+    log_torch_model,
+    open_stage,
+    world_model_outputs,
+)
 from pipeline.worldmodel.residual import fit_residual, save_residual
 
 
@@ -59,6 +67,10 @@ def run(
             lambda path: save_residual(path, result, settings),
             out, metrics, history, summary, result.history,
         )  # fmt: skip
+        points = torch.zeros(1, 1 + result.model.num_humans, 2)
+        speeds = {"v": torch.zeros(1), "omega": torch.zeros(1)}
+        motion = {"points": points, "velocity": points, **speeds}
+        log_torch_model(run, result.model, motion, ("velocity_change",))
     m = result.metrics
     return (
         f"wrote {out}: {m['train_samples']} training samples; best epoch {m['best_epoch']} of "

@@ -5,10 +5,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from pipeline.config import Params
 from pipeline.io import check_writable
 from pipeline.progress import progress
-from pipeline.stages.common import config_path, epoch_logger, open_stage, world_model_outputs
+from pipeline.stages.common import (
+    config_path,
+    epoch_logger,
+    log_torch_model,
+    open_stage,
+    world_model_outputs,
+)
 from pipeline.worldmodel.fit import fit_vae
 from pipeline.worldmodel.training import save_vae
 
@@ -41,6 +49,9 @@ def run(
             out, metrics, history, summary, result.history,
         )  # fmt: skip
         run.log_figure(fitted.figure(), "figures/reconstruction.png")
+        vae = result.model
+        obs = torch.zeros(1, vae.input_dim, dtype=vae.mu_head.weight.dtype)
+        log_torch_model(run, vae, {"obs": obs}, ("recon", "mu", "logvar"))
     return (
         f"wrote {out}: validation reconstruction MSE {result.metrics['val_recon_mse']:.4f} "
         f"vs {result.metrics['baseline_mse']:.4f} for the training mean"
