@@ -12,12 +12,11 @@ The paper's per-variant hyper-parameters (paper_spec §5) are the overlay ``conf
 
 from __future__ import annotations
 
-import json
 from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, model_validator
+from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
-from pipeline.env.params import Section, describe_error
+from pipeline.env.params import Section
 from pipeline.planning.params import PLANNER_NAMES
 
 VARIANT_NAMES: tuple[str, ...] = (
@@ -203,30 +202,11 @@ class AgentParams(Section):
                 f"learning_starts: must be between batch_size ({self.batch_size}) and "
                 f"buffer_size ({self.buffer_size}), got {self.learning_starts}"
             )
-        shared = {name: getattr(self, name) for name in type(self).model_fields}
-        shared["per_variant"] = {}
-        for variant, changes in self.per_variant.items():
-            if variant not in VARIANT_NAMES:
-                raise ValueError(
-                    f"per_variant: unknown variant {variant!r}; expected some of "
-                    f"{', '.join(VARIANT_NAMES)}"
-                )
-            if "per_variant" in changes:
-                raise ValueError(f"per_variant.{variant}.per_variant: cannot be nested")
-            try:
-                type(self).model_validate({**shared, **changes})
-            except ValidationError as exc:
-                _, message = describe_error(exc.errors()[0], f"per_variant.{variant}")
-                raise ValueError(message) from None
+        self._check_overrides("per_variant", VARIANT_NAMES, "variant")
         return self
-
-    def __hash__(self) -> int:  # per_variant is a dict: hash the values' JSON instead
-        return hash(json.dumps(self.to_dict(), sort_keys=True))
 
     def resolved(self, variant: str) -> AgentParams:
         """The values a run of ``variant`` uses: ``self`` with ``per_variant[variant]`` applied
         (and ``per_variant`` emptied); ``self`` itself when ``per_variant`` is empty."""
         check_variant(variant)
-        if not self.per_variant:
-            return self
-        return self.replace(**self.per_variant.get(variant, {}), per_variant={})
+        return self._overridden("per_variant", variant)

@@ -12,6 +12,7 @@ one-line wording of a validation error that :mod:`pipeline.config` uses too.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Mapping
@@ -40,7 +41,7 @@ REWARD_KINDS: tuple[str, ...] = ("paper", "dense")
 # Floats must be finite (`allow_inf_nan=False` on every float field): `.inf` passes `gt=0`.
 SECTION_CONFIG = ConfigDict(extra="forbid", frozen=True, strict=True, use_attribute_docstrings=True)
 
-_NAMED = re.compile(r"^([A-Za-z_][\w.]*): (.*)$", re.DOTALL)
+_NAMED = re.compile(r"^([A-Za-z_][\w.-]*): (.*)$", re.DOTALL)
 
 
 def _short_repr(value: Any, limit: int = 60) -> str:
@@ -145,9 +146,45 @@ class Section(BaseModel):
         current = {name: getattr(self, name) for name in type(self).model_fields}
         return type(self)(**{**current, **changes})
 
+    def __hash__(self) -> int:  # a dict field (agent.per_variant) is not hashable: hash the JSON
+        return hash(json.dumps(self.to_dict(), sort_keys=True))
+
     def to_dict(self) -> dict[str, Any]:
         """The values as a plain, JSON-able dict (lists, not tuples)."""
         return self.model_dump(mode="json")
+
+    # -- per-name overrides (agent.per_variant, planning.per_method) ------------------------------
+
+    def _check_overrides(self, field: str, names: tuple[str, ...], kind: str) -> None:
+        """Check the overrides in ``field`` (a dict: name → changes of the other fields): every
+        name is one of ``names`` (each a ``kind``, e.g. ``variant``), and the section with each
+        name's changes applied is valid.
+
+        Raises:
+            ValueError: one line naming ``field.name`` (and the key) at fault.
+        """
+        shared = {name: getattr(self, name) for name in type(self).model_fields}
+        shared[field] = {}
+        for name, changes in getattr(self, field).items():
+            if name not in names:
+                raise ValueError(
+                    f"{field}: unknown {kind} {name!r}; expected some of {', '.join(names)}"
+                )
+            if field in changes:
+                raise ValueError(f"{field}.{name}.{field}: cannot be nested")
+            try:
+                type(self).model_validate({**shared, **changes})
+            except ValidationError as exc:
+                _, message = describe_error(exc.errors()[0], f"{field}.{name}")
+                raise ValueError(message) from None
+
+    def _overridden(self, field: str, name: str) -> Self:
+        """``self`` with ``field[name]``'s changes applied and ``field`` emptied (``self`` itself
+        when ``field`` is empty)."""
+        overrides = getattr(self, field)
+        if not overrides:
+            return self
+        return self.replace(**overrides.get(name, {}), **{field: {}})
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> Self:

@@ -63,10 +63,13 @@ def planner_policy(
     Args:
         method: one of :data:`~pipeline.planning.params.PLANNER_NAMES`.
         env_params: the scenarios' parameters.
-        planning: the ``planning`` section.
+        planning: the ``planning`` section (its ``per_method`` entry for ``method`` applied
+            here).
         files: the model files (:func:`model_files`); default: the pipeline's.
     """
     from pipeline.planning.mpc import Planner
+
+    planning = planning.resolved(method)
 
     files = model_files(method) if files is None else dict(files)
     if method == "oracle-mpc":

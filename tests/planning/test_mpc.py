@@ -94,6 +94,9 @@ def test_cv_mpc_evaluation_runs_once_without_a_training_seed() -> None:
         ("planning.prefix_length=6", "planning.prefix_length"),
         ("planning.continuations=[goal, goal]", "planning.continuations"),
         ("planning.discount=1.5", "planning.discount"),
+        ("planning.per_method.mpc={horizon: 3}", "planning.per_method: unknown planner 'mpc'"),
+        ("planning.per_method.cv-mpc.horizon=0", "planning.per_method.cv-mpc.horizon"),
+        ("planning.per_method.cv-mpc.horizn=3", "planning.per_method.cv-mpc.horizn"),
     ],
 )
 def test_bad_planning_values_name_their_key(tmp_path, override: str, key: str) -> None:
@@ -101,3 +104,16 @@ def test_bad_planning_values_name_their_key(tmp_path, override: str, key: str) -
     path.write_text("seed: 0\n")
     with pytest.raises(ConfigError, match=key):
         load_params(path, [override])
+
+
+def test_a_planner_uses_its_per_method_overrides_and_only_it(tmp_path) -> None:
+    path = tmp_path / "params.yaml"
+    path.write_text("seed: 0\n")
+    shipped = load_params(path).planning
+    assert shipped.resolved("cv-mpc") == shipped.replace(per_method={})
+    assert shipped.resolved("vae-lstm-mpc").horizon == shipped.per_method["vae-lstm-mpc"]["horizon"]
+    params = load_params(path, ["planning.per_method.cv-mpc.horizon=3"]).planning
+    assert params.resolved("cv-mpc").horizon == 3
+    assert params.resolved("oracle-mpc").horizon == params.horizon == 12
+    with pytest.raises(ValueError, match="unknown planner 'orca'"):
+        params.resolved("orca")
