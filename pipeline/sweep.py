@@ -17,10 +17,10 @@ Layout (``runs_dir``: ``data/studies/<name>``, ``out_dir``: ``reports/studies/<n
     out_dir/summary.md                                 means and 95% intervals over seeds
     out_dir/figures/<key>.png                          each metric against each grid parameter
 
-A run whose ``result.json`` carries the same fingerprint (its resolved parameters and the world
-model's files) is skipped; an unfinished one resumes from its checkpoint; a failed one is
-reported with its error and does not stop the others. Only this module imports ray, and only
-inside :func:`run_sweep`.
+A run whose ``result.json`` carries the same fingerprint (its resolved parameters, and the world
+model's files when its variant reads them) is skipped; an unfinished one resumes from its
+checkpoint; a failed one is reported with its error and does not stop the others. Only this
+module imports ray, and only inside :func:`run_sweep`.
 """
 
 from __future__ import annotations
@@ -210,6 +210,8 @@ def plan_sweep(
         for values in itertools.product(*study.grid.values())
         for seed in study.seeds
     ]
+    from pipeline.agents.features import VARIANTS
+
     digests = {"vae": _file_digest(vae), "lstm": _file_digest(lstm)}
     plan_params: dict[RunSpec, Params] = {}
     fingerprints: dict[RunSpec, str] = {}
@@ -225,7 +227,7 @@ def plan_sweep(
             "variant": run.variant,
             "seed": run.seed,
             "params": {section: data[section] for section in _RUN_SECTIONS},
-            **digests,
+            **(digests if VARIANTS[run.variant].needs_world_model else {}),
         }
         fingerprints[run] = hashlib.sha256(
             json.dumps(identity, sort_keys=True, default=str).encode()

@@ -138,6 +138,16 @@ def test_the_shipped_studies_resolve_every_run(sweepdir: Path) -> None:
     assert len(plan_sweep("seeds", params.studies["seeds"]).runs) == 5 * 5
 
 
+def test_only_the_runs_that_read_the_world_model_depend_on_its_files(sweepdir: Path) -> None:
+    study = StudyParams(variants=["dueling-dqn", "maspm"], seeds=[0])
+    before = plan_sweep("s", study).fingerprints
+    vae, _ = tiny_world_model(seed=1)
+    save_vae(sweepdir / "models" / "vae.pt", vae)
+    after = plan_sweep("s", study).fingerprints
+    changed = {run.variant for run in before if before[run] != after[run]}
+    assert changed == {"maspm"}  # dueling-dqn's runs are kept across a new world model
+
+
 def test_a_bad_grid_fails_in_one_line_before_any_run(sweepdir: Path) -> None:
     study = StudyParams(variants=["maspm"], seeds=[0], grid={"agent.horizn": [2]})
     with pytest.raises(ConfigError, match=r"sweep s, run maspm/agent\.horizn=2/seed-0: .*horizn"):
