@@ -38,23 +38,25 @@ run:
 # `dvc repro` with the agent trainings and the evaluations in parallel (with whatever `dvc` is
 # on PATH). DVC runs one stage at a time, and the trainings (the agents and the planning models:
 # independent stages, minutes each on one core) are most of the pipeline's time, so they run
-# first as JOBS `dvc repro --single-item` processes: DVC releases its repository lock while a
-# stage's command runs, and --wait-for-lock queues the jobs' short bookkeeping (hashing,
-# dvc.lock). vae-lstm-mpc's evaluation (the longest stage, over an hour of one core, needing only
-# the world model) starts first, then the world-model variants, the longest trainings; the
-# dueling-dqn ones fill the end, so that the last job to finish is a short one. The other
-# evaluations follow the same way, and the final `dvc repro` runs the rest (the report) and
-# finds everything else up to date. A training's numbers do not depend on the order; the
+# first as JOBS `dvc repro --single-item` processes, one per line of stage names: DVC releases
+# its repository lock while a stage's command runs, and --wait-for-lock queues the jobs' short
+# bookkeeping (hashing, dvc.lock). The two long planner evaluations start first:
+# vae-lstm-mpc's (it needs only the world model), and wm-mpc's on the same line as the planning
+# model it plans with (seed 0), so that it runs after it. The world-model variants follow, the
+# longest trainings; the dueling-dqn ones fill the end, so that the last job to finish is a
+# short one. The other evaluations follow the same way, and the final `dvc repro` runs the rest
+# (the report) and finds everything else up to date. A training's numbers do not depend on the order; the
 # world-model variants' can differ in the last bits with THREADS (float32 sums), and dvc.lock's
 # were made with THREADS=1. JOBS=1 gives the plain sequential `dvc repro report`. The studies
 # (studies/dvc.yaml: grids of agent runs, hours on two cores) are not part of it.
-PARALLEL = OMP_NUM_THREADS=$(THREADS) xargs -n 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
+PARALLEL = OMP_NUM_THREADS=$(THREADS) xargs -L 1 -P $(JOBS) dvc --wait-for-lock repro --single-item
 
 repro:
 	dvc repro train_lstm
 	dvc stage list --name-only \
 		| grep -E '^(train_planning_model@|train_agent@|evaluate_vae_lstm_mpc$$)' \
-		| awk '/^evaluate_vae_lstm_mpc$$/ { first = $$0 "\n"; next } \
+		| awk '/^evaluate_vae_lstm_mpc$$/ { first = first $$0 "\n"; next } \
+			/^train_planning_model@0$$/ { first = first $$0 " evaluate_wm_mpc\n"; next } \
 			/@dueling-dqn-/ { short = short $$0 "\n"; next } { rest = rest $$0 "\n" } \
 			END { printf "%s%s%s", first, rest, short }' \
 		| $(PARALLEL)
