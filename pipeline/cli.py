@@ -460,24 +460,20 @@ def report(
 @friendly_errors
 def predict(
     params_path: ParamsOption = Path("params.yaml"),
+    overrides: SetOption = None,
+    overlays: OverlayOption = None,
     vae: Annotated[Path, typer.Option(help="The VAE file.")] = Path("models/vae.pt"),
     lstm: Annotated[Path, typer.Option(help="The LSTM file.")] = Path("models/lstm.pt"),
     agent: Annotated[
         Path | None,
         typer.Option(help="Agent file of the ε-greedy policy (default: dueling-dqn seed 0)."),
     ] = Path("models/agents/dueling-dqn/seed-0.pt"),
-    episodes: Annotated[int, typer.Option(min=1, help="Scenarios per policy.")] = 300,
-    scenario_seed: Annotated[
-        int, typer.Option(min=0, help="Their seed (neither a training nor the test seed).")
-    ] = 2_000_003,
-    warmup: Annotated[int, typer.Option(min=1, help="Real steps before the rollout.")] = 5,
-    horizon: Annotated[int, typer.Option(min=1, help="Steps ahead: k = 1..horizon.")] = 16,
-    epsilon: Annotated[
-        float, typer.Option(min=0.0, max=1.0, help="Exploration of the agent's policy.")
-    ] = 0.2,
     planning_model: Annotated[
         list[Path] | None,
-        typer.Option(help="A planning world model file (repeat: one per training seed)."),
+        typer.Option(
+            help="A planning world model file (repeat: one per training seed; default: "
+            "models/planning/seed-S.pt for each of planning_model.seeds)."
+        ),
     ] = None,
     out: Annotated[Path, typer.Option(help="The errors (JSON).")] = Path("metrics/prediction.json"),
     figure: Annotated[Path, typer.Option(help="Error against k (PNG).")] = Path(
@@ -489,8 +485,8 @@ def predict(
     """k-step prediction errors in metres of the world model (VAE + LSTM) and the planning world
     model's seeds beside copy-last, static humans and constant velocity (the robot's own motion
     exact), under the random policy and a trained agent's ε-greedy one, open loop with the true
-    actions."""
-    params = _load(params_path, None, None)
+    actions; the settings are params.yaml's `prediction` section."""
+    params = _load(params_path, overlays, overrides)
     _set_threads(threads)
     from pipeline.evaluation.rendering import PREDICTION_KS
     from pipeline.stages import predict as stage
@@ -501,11 +497,6 @@ def predict(
         vae=vae,
         lstm=lstm,
         agent=agent,
-        episodes=episodes,
-        scenario_seed=scenario_seed,
-        warmup=warmup,
-        horizon=horizon,
-        epsilon=epsilon,
         planning_models=planning_model,
         out=out,
         figure=figure,

@@ -49,6 +49,7 @@ __all__ = [
     "LstmParams",
     "Params",
     "ReportParams",
+    "PredictionParams",
     "STAGE_SECTIONS",
     "StudyParams",
     "VaeParams",
@@ -255,6 +256,25 @@ class PlanningModelParams(Section):
         return _distinct_non_negative(value)
 
 
+class PredictionParams(Section):
+    """The ``predict`` stage (pipeline/worldmodel/prediction.py): each world model's k-step
+    errors in metres, open loop with the true actions after a warm-up on the real trajectory,
+    under the random policy and a trained agent's ε-greedy one, on fresh scenarios."""
+
+    SECTION: ClassVar[str] = "prediction"
+
+    episodes: int = Field(300, gt=0)
+    """Scenarios per policy."""
+    scenario_seed: int = Field(2_000_003, ge=0)
+    """Their seed: neither a training, a validation nor the test seed."""
+    warmup: int = Field(5, gt=0)
+    """Real steps before each open-loop rollout."""
+    horizon: int = Field(16, gt=0)
+    """Steps ahead: k = 1 … horizon."""
+    epsilon: float = Field(0.2, ge=0, le=1, allow_inf_nan=False)
+    """Exploration of the agent's policy (a random action with this probability)."""
+
+
 GridValue = bool | int | float | str
 
 
@@ -345,6 +365,8 @@ class Params(Section):
     """The planners (cv-mpc); see pipeline/planning/params.py."""
     planning_model: PlanningModelParams = Field(default_factory=PlanningModelParams)
     """The planning world model (wm-mpc's); see pipeline/worldmodel/residual.py."""
+    prediction: PredictionParams = Field(default_factory=PredictionParams)
+    """The world models' k-step errors in metres (the ``predict`` stage)."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
     studies: dict[str, StudyParams] = Field(default_factory=_default_studies)
@@ -607,6 +629,7 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "evaluate_wm_mpc": ("env", "eval", "planning"),
     "evaluate_vae_lstm_mpc": ("env", "eval", "planning"),
     "train_planning_model": ("env", "planning_model"),
+    "predict": ("env", "prediction", "planning_model.seeds"),
     "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
     "study_horizon": ("env", "eval", "agent", "studies.horizon"),
     "study_seeds": ("env", "eval", "agent", "studies.seeds"),

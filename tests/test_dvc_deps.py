@@ -84,12 +84,16 @@ def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> 
 
 
 def test_predict_measures_every_planning_model_seed() -> None:
-    from pipeline.config import load_params
+    """The stage names no seed: it reads planning_model.seeds (a param of the stage) and the
+    folder that holds every seed's model (a dependency), so a change of the seeds reruns it."""
+    from pipeline.stages.train_planning_model import model_path
 
-    seeds = load_params(ROOT / "params.yaml").planning_model.seeds
-    stage = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]["predict"]
-    files = [f"models/planning/seed-{seed}.pt" for seed in seeds]
-    words = stage["cmd"].split()
-    passed = [words[i + 1] for i, word in enumerate(words) if word == "--planning-model"]
-    assert passed == files
-    assert [dep for dep in stage["deps"] if dep.startswith("models/planning/")] == files
+    stages = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+    stage = stages["predict"]
+    assert "--planning-model" not in stage["cmd"]
+    assert "planning_model.seeds" in stage["params"] and "prediction" in stage["params"]
+    folder = model_path(0).parent.as_posix()
+    assert folder in stage["deps"]
+    writer = stages["train_planning_model"]["do"]["outs"]
+    assert all(Path(out if isinstance(out, str) else next(iter(out))).parent.as_posix() == folder
+               for out in writer)  # fmt: skip

@@ -9,18 +9,14 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.agents.agent_file import load_agent
-from pipeline.config import Params, params_dict, select_sections
+from pipeline.config import STAGE_SECTIONS, Params, params_dict, select_sections
 from pipeline.evaluation.figures import prediction_figure
 from pipeline.io import check_writable, outputs_together, write_json_atomic
+from pipeline.stages.train_planning_model import model_path
 from pipeline.tracking import stage_run
 from pipeline.worldmodel.prediction import evaluate_prediction
 from pipeline.worldmodel.residual import load_residual
 from pipeline.worldmodel.training import load_lstm, load_vae
-
-SECTIONS: tuple[str, ...] = ("env",)
-"""The parts of params.yaml the stage reads (dvc.yaml's ``params:``); its own settings are the
-command's options, written out in dvc.yaml's ``cmd``. (The other stages' lists are
-:data:`pipeline.config.STAGE_SECTIONS`.)"""
 
 
 def run(
@@ -29,41 +25,36 @@ def run(
     vae: Path,
     lstm: Path,
     agent: Path | None,
-    episodes: int,
-    scenario_seed: int,
-    warmup: int,
-    horizon: int,
-    epsilon: float,
     planning_models: list[Path] | None = None,
     out: Path,
     figure: Path,
     tracking: bool = True,
 ) -> dict[str, Any]:
-    """Measure, write ``out`` and ``figure`` together, log to MLflow; returns the errors."""
+    """Measure with the ``prediction`` section's settings, write ``out`` and ``figure``
+    together, log to MLflow; returns the errors. ``planning_models`` defaults to every seed of
+    ``planning_model.seeds`` at its pipeline path."""
     check_writable(out, figure)
+    if planning_models is None:
+        planning_models = [model_path(seed) for seed in params.planning_model.seeds]
     settings = {
-        **select_sections(params_dict(params), SECTIONS),
-        "prediction": {
-            "episodes": episodes,
-            "scenario_seed": scenario_seed,
-            "warmup": warmup,
-            "horizon": horizon,
-            "epsilon": epsilon,
+        **select_sections(params_dict(params), STAGE_SECTIONS["predict"]),
+        "files": {
             "agent": str(agent) if agent else None,
-            "planning_models": [str(path) for path in planning_models or []],
+            "planning_models": [str(path) for path in planning_models],
         },
     }
+    p = params.prediction
     with stage_run("predict", settings, enabled=tracking) as mlflow_run:
         result = evaluate_prediction(
             params.env,
             world_model=(load_vae(vae), load_lstm(lstm)),
             agent=load_agent(agent) if agent is not None else None,
-            episodes=episodes,
-            scenario_seed=scenario_seed,
-            warmup=warmup,
-            horizon=horizon,
-            epsilon=epsilon,
-            planning_models=[load_residual(path) for path in planning_models or []],
+            episodes=p.episodes,
+            scenario_seed=p.scenario_seed,
+            warmup=p.warmup,
+            horizon=p.horizon,
+            epsilon=p.epsilon,
+            planning_models=[load_residual(path) for path in planning_models],
         )
         with outputs_together(out, figure) as (out_tmp, figure_tmp):
             write_json_atomic(out_tmp, result)
