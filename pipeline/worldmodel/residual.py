@@ -7,8 +7,10 @@ is pure kinematics, and so is the part of every human's apparent motion that the
 What is unknown is how the humans move in the world. This model keeps each human's last world
 velocity (the constant-velocity baseline) and learns only its change at each step::
 
-    u_h ← u_h + f(features_h)          (the human's velocity per step, robot frame)
+    u_h ← cap(u_h + f(features_h))     (the human's velocity per step, robot frame)
     p, u ← advance(p, u, v, ω)         (exact: the human moves by u_h, the robot by (v, ω))
+
+where ``cap`` scales a velocity above the humans' top speed back to it, as the simulator does.
 
 ``f`` is one small MLP shared by every human. Its features are seen from the human: the human's
 own speed, and the position and velocity, relative to it, of every other human and of the
@@ -71,11 +73,15 @@ class ResidualDynamics(nn.Module):
         num_humans: humans in the scene.
         hidden_dim: width of the MLP's two hidden layers.
         dt: the step (s), to turn the robot's command into its displacement per step.
+        max_speed: the humans' top speed (m/s): a corrected velocity longer than it is scaled
+            back to it, as the simulator caps theirs (None: no cap).
     """
 
-    def __init__(self, num_humans: int, hidden_dim: int, dt: float) -> None:
+    def __init__(
+        self, num_humans: int, hidden_dim: int, dt: float, max_speed: float | None = None
+    ) -> None:
         super().__init__()
-        self.num_humans, self.dt = num_humans, dt
+        self.num_humans, self.dt, self.max_speed = num_humans, dt, max_speed
         # Own speed, then (relative position, relative velocity) of each other human and the
         # robot, then the robot's turn per step.
         inputs = 1 + 4 * num_humans + 1
@@ -128,8 +134,12 @@ class ResidualDynamics(nn.Module):
         self, points: torch.Tensor, velocity: torch.Tensor, v: torch.Tensor, omega: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """One predicted step: the corrected velocities, then the exact motion."""
-        change = self(points, velocity, v, omega)
-        velocity = torch.cat([velocity[:, :1], velocity[:, 1:] + change], dim=1)
+        humans = velocity[:, 1:] + self(points, velocity, v, omega)
+        if self.max_speed is not None:
+            limit = self.max_speed * self.dt
+            length = torch.linalg.vector_norm(humans, dim=-1, keepdim=True)
+            humans = humans * torch.clamp(limit / length.clamp(min=1e-12), max=1.0)
+        velocity = torch.cat([velocity[:, :1], humans], dim=1)
         return ego_advance(points, velocity, v, omega, self.dt)
 
     def rollout(
@@ -242,7 +252,9 @@ def train_residual(
     """Adam on the open-loop rollout loss; the weights of the best validation epoch are kept
     (the untrained model, constant velocity, is epoch 0)."""
     torch.manual_seed(seed)
-    model = ResidualDynamics(env_params.num_humans, hidden_dim, env_params.dt)
+    model = ResidualDynamics(
+        env_params.num_humans, hidden_dim, env_params.dt, env_params.human_max_speed
+    )
     table = torch.as_tensor(discrete_commands(env_params))
 
     def tensors(seqs: Sequences) -> tuple[torch.Tensor, ...]:
@@ -384,6 +396,7 @@ def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, An
             "num_humans": result.model.num_humans,
             "hidden_dim": result.model.net[0].out_features,
             "dt": result.model.dt,
+            "max_speed": result.model.max_speed,
             "settings": settings,
             "metrics": result.metrics,
         },
@@ -396,7 +409,9 @@ def load_residual(path: Any) -> ResidualDynamics:
     data = torch.load(path, map_location="cpu", weights_only=True)
     if not isinstance(data, dict) or data.get("format") != "socnav-wm residual-cv":
         raise ValueError(f"{path}: not a socnav-wm residual-cv planning model")
-    model = ResidualDynamics(data["num_humans"], data["hidden_dim"], data["dt"])
+    model = ResidualDynamics(
+        data["num_humans"], data["hidden_dim"], data["dt"], data.get("max_speed")
+    )
     model.load_state_dict(data["state_dict"])
     return model.eval()
 

@@ -61,6 +61,25 @@ def test_an_untrained_model_is_constant_velocity(recording) -> None:
     np.testing.assert_allclose(ours, cv, atol=1e-12)
 
 
+def test_a_corrected_human_never_outruns_the_top_speed_and_the_cap_keeps_cv(recording) -> None:
+    capped = residual.ResidualDynamics(ENV.num_humans, 16, ENV.dt, ENV.human_max_speed)
+    start = (recording.obs[2], recording.obs[3], recording.actions[2])
+    future = recording.actions[3:9].T
+    cv = predict_positions("constant-velocity", *start, future, ENV)
+    # Within 10 µm: the observed velocities exceed the cap by rounding only.
+    np.testing.assert_allclose(residual.residual_positions(capped, *start, future, ENV), cv,
+                               atol=1e-5)  # fmt: skip
+    with torch.no_grad():
+        capped.net[-1].bias.fill_(1.0)  # pushes every human by ~1.4 m per step
+    points, velocity = residual._start(*start, ENV)
+    v, w = (torch.zeros(len(points), dtype=torch.float64),) * 2  # the robot stands still
+    p0 = torch.from_numpy(points)
+    p1, u1 = capped.double().step(p0, torch.from_numpy(velocity), v, w)
+    moved = torch.linalg.vector_norm(p1[:, 1:] - p0[:, 1:], dim=-1)
+    assert moved.max() <= ENV.human_max_speed * ENV.dt + 1e-9
+    assert moved.max() >= ENV.human_max_speed * ENV.dt - 1e-9  # ... and is held there
+
+
 def test_a_trained_correction_changes_the_humans_and_never_the_goal(recording) -> None:
     model = perturbed()
     start = (recording.obs[2], recording.obs[3], recording.actions[2])
