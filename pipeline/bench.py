@@ -409,9 +409,12 @@ def bench_plan(
             for _ in range(2):  # warm-up
                 decide()
             rate = _rate(decide, seconds)
+            resolved = planning.resolved(method)
             rows.append(
                 {
                     "planner": method,
+                    "futures": 4**resolved.prefix_length * len(resolved.continuations),
+                    "horizon": resolved.horizon,
                     "envs": n,
                     "decisions_per_cpu_s": rate,
                     "cpu_ms_per_decision": 1000.0 / rate,

@@ -986,9 +986,8 @@ def bench_plan_command(
         )  # fmt: skip
     _print_table(
         rows,
-        f"socnav-wm bench plan ({where}, one thread, {seconds:g} CPU-s per row; "
-        f"horizon {config.planning.horizon}, {4**config.planning.prefix_length} prefixes x "
-        f"{len(config.planning.continuations)} continuations)",
+        f"socnav-wm bench plan ({where}, one thread, {seconds:g} CPU-s per row; futures: "
+        "prefixes x continuations, each imagined horizon steps)",
         {"decisions_per_cpu_s": ",.1f", "cpu_ms_per_decision": ".2f"},
     )
 

@@ -266,10 +266,15 @@ def test_bench_plan_reports_decisions_per_cpu_second(tmp_path) -> None:
     files = {"vae-lstm-mpc": {"vae": tmp_path / "vae.pt", "lstm": tmp_path / "lstm.pt"}}
     rows = bench_plan(
         ("oracle-mpc", "vae-lstm-mpc"), (1, 3), env_params=ENV,
-        planning=PlanningParams(horizon=2, prefix_length=1), files=files, seconds=0.05,
+        planning=PlanningParams(
+            horizon=2, prefix_length=1, per_method={"vae-lstm-mpc": {"horizon": 3}}
+        ),
+        files=files, seconds=0.05,
     )  # fmt: skip
-    assert [(r["planner"], r["envs"]) for r in rows] == [
-        ("oracle-mpc", 1), ("oracle-mpc", 3), ("vae-lstm-mpc", 1), ("vae-lstm-mpc", 3)
+    # Each row says what its planner imagined: its per_method overrides applied.
+    assert [(r["planner"], r["envs"], r["futures"], r["horizon"]) for r in rows] == [
+        ("oracle-mpc", 1, 12, 2), ("oracle-mpc", 3, 12, 2),
+        ("vae-lstm-mpc", 1, 12, 3), ("vae-lstm-mpc", 3, 12, 3),
     ]  # fmt: skip
     for row in rows:
         assert row["decisions_per_cpu_s"] > 0
