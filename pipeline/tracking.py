@@ -330,17 +330,25 @@ class _MlflowRun(Run):
         from mlflow.models import infer_signature
 
         signature = infer_signature(dict(inputs), dict(outputs))
-        with tempfile.TemporaryDirectory() as tmp:
-            local = Path(tmp) / name
-            # The requirement is given: inferring it would load the model in a subprocess.
-            mlflow.pytorch.save_model(
-                module,
-                str(local),
-                signature=signature,
-                serialization_format="pickle",  # the nn.Module itself, as load_model returns it
-                pip_requirements=[f"torch=={torch.__version__.split('+')[0]}"],
-            )
-            self._client.log_artifacts(self.run_id, str(local), name)
+        # Pickle, not MLflow's pt2 graph (traced at the example's fixed batch size): the module
+        # is the pipeline's own, so its warning on loading untrusted pickles is left out here.
+        pytorch_log = logging.getLogger("mlflow.pytorch")
+        level = pytorch_log.level
+        pytorch_log.setLevel(logging.ERROR)
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                local = Path(tmp) / name
+                # The requirement is given: inferring it would load the model in a subprocess.
+                mlflow.pytorch.save_model(
+                    module,
+                    str(local),
+                    signature=signature,
+                    serialization_format="pickle",  # the nn.Module, as load_model returns it
+                    pip_requirements=[f"torch=={torch.__version__.split('+')[0]}"],
+                )
+                self._client.log_artifacts(self.run_id, str(local), name)
+        finally:
+            pytorch_log.setLevel(level)
 
     def set_tag(self, key: str, value: Any) -> None:
         self._client.set_tag(self.run_id, key, _truncate(str(value), _MAX_TAG_VALUE))
