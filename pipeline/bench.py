@@ -9,6 +9,7 @@ given, as a training does.
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 import tracemalloc
@@ -287,9 +288,25 @@ CONTENTION_STAGE_SETTINGS: tuple[str, ...] = (
     "vae.max_epochs=3",
     "vae.patience=3",
     "vae.device=cpu",
+    "lstm.max_epochs=2",
+    "lstm.patience=2",
+    "lstm.device=cpu",
+    "agent.episodes=300",
+    "agent.eval_episodes=50",
+    "agent.select_every=0",
+    "agent.device=cpu",
+    "planning_model.max_epochs=1",
 )
-"""The ``train-vae`` run of :func:`bench_contention`: the shipped VAE, three epochs over 1000
-random episodes (a few CPU-seconds)."""
+"""The stages' runs in :func:`bench_contention`: the shipped networks, trained briefly on 1000
+random episodes (a few to some tens of CPU-seconds each)."""
+
+CONTENTION_STAGES: dict[str, tuple[str, ...]] = {
+    "train-vae": ("train-vae",),
+    "train-lstm": ("train-lstm",),
+    "train-agent": ("train-agent", "--variant", "wm-dueling-dqn"),
+    "train-planning-model": ("train-planning-model", "--seed", "0"),
+}
+"""The torch stages :func:`bench_contention` can measure, as ``socnav-wm`` arguments."""
 
 
 def _child_cpu_seconds(command: list[str], cwd: str, env: dict[str, str]) -> tuple[float, float]:
@@ -311,16 +328,26 @@ def bench_contention(
     hogs: int,
     repeats: int = 1,
     settings: tuple[str, ...] = CONTENTION_STAGE_SETTINGS,
+    stages: tuple[str, ...] = ("train-vae",),
 ) -> list[dict[str, Any]]:
-    """CPU-seconds of the ``train-vae`` stage alone and beside ``hogs`` busy processes
-    (``yes > /dev/null``), for each torch thread count.
+    """CPU-seconds of each of ``stages`` (:data:`CONTENTION_STAGES`) alone and beside ``hogs``
+    busy processes (``yes > /dev/null``), for each torch thread count.
 
     A stage whose threads spin while waiting for a core (OpenMP's busy wait) burns CPU-seconds
-    the work does not need when the cores are shared; the ratio says by how much. The stage
-    runs as its own process (``socnav-wm train-vae --no-tracking``) in a temporary folder, on
-    data that ``socnav-wm collect`` writes there first, both with ``settings`` (``--set``
-    overrides of the defaults). Each row is the fastest of ``repeats``.
+    the work does not need when the cores are shared; the ratio says by how much. Each stage
+    runs as its own process (``socnav-wm STAGE --no-tracking``) in a temporary folder, on data
+    that ``socnav-wm collect`` (and, for the stages that read them, ``train-vae`` and
+    ``train-lstm``) write there first, all with ``settings`` (``--set`` overrides of the
+    defaults). Each row is the fastest of ``repeats``.
+
+    Raises:
+        ValueError: a stage that is not one of :data:`CONTENTION_STAGES`.
     """
+    for name in stages:
+        if name not in CONTENTION_STAGES:
+            raise ValueError(
+                f"--stage: unknown {name!r}; expected one of {', '.join(CONTENTION_STAGES)}"
+            )
     import subprocess
     import sys
     import tempfile
@@ -331,9 +358,13 @@ def bench_contention(
     rows = []
     with tempfile.TemporaryDirectory(prefix="socnav-wm-contention-") as work:
         open(os.path.join(work, "params.yaml"), "w").close()  # every default
-        _child_cpu_seconds([*cli, "collect", "--no-tracking", "--quiet", *options], work, env)
-        for n in threads:
-            stage = [*cli, "train-vae", "--no-tracking", "--quiet", f"--threads={n}", *options]
+        needs = {"train-lstm": ["train-vae"], "train-agent": ["train-vae", "train-lstm"]}
+        made = ["collect", *dict.fromkeys(m for name in stages for m in needs.get(name, []))]
+        for step in made:  # the inputs, once
+            _child_cpu_seconds([*cli, step, "--no-tracking", "--quiet", *options], work, env)
+        for name, n in itertools.product(stages, threads):
+            stage = [*cli, *CONTENTION_STAGES[name], "--no-tracking", "--quiet", f"--threads={n}",
+                     *options]  # fmt: skip
             alone = min(_child_cpu_seconds(stage, work, env) for _ in range(repeats))
             busy = [subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) for _ in range(hogs)]
             try:
@@ -344,7 +375,7 @@ def bench_contention(
                     hog.wait()
             rows.append(
                 {
-                    "stage": "train-vae",
+                    "stage": name,
                     "threads": n,
                     "omp_wait_policy": env.get("OMP_WAIT_POLICY", "(default)"),
                     "gomp_spincount": env.get("GOMP_SPINCOUNT", "(default)"),

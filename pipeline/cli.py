@@ -1003,13 +1003,23 @@ def bench_contention_command(
         int | None, typer.Option(help="Busy processes beside it (default: one per core).", min=1)
     ] = None,
     repeats: Annotated[int, typer.Option(min=1, help="Runs per cell; the fastest counts.")] = 1,
+    stage: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="A torch stage (repeatable): train-vae, train-lstm, train-agent, "
+            "train-planning-model (default: all four)."
+        ),
+    ] = None,
 ) -> None:
-    """CPU-seconds of the train-vae stage alone and beside busy processes (`yes`), per thread
+    """CPU-seconds of each torch stage alone and beside busy processes (`yes`), per thread
     count: how much a shared machine inflates a stage's work."""
-    from pipeline.bench import bench_contention
+    from pipeline.bench import CONTENTION_STAGES, bench_contention
 
     cores = available_cores()
-    rows = bench_contention(tuple(threads or sorted({1, cores})), hogs or cores, repeats)
+    stages = tuple(stage or CONTENTION_STAGES)
+    rows = bench_contention(
+        tuple(threads or sorted({1, cores})), hogs or cores, repeats, stages=stages
+    )
     _print_table(
         rows,
         f"socnav-wm bench contention ({cores} cores; CPU-seconds of the stage process, "
