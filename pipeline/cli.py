@@ -17,14 +17,16 @@ from typing import Annotated, Any
 
 import typer
 
-# OpenMP threads that wait for work spin a little (10,000 iterations), then sleep. libgomp reads
+# OpenMP threads that wait for work spin a little (1,000 iterations), then sleep. libgomp reads
 # this when torch loads it, so it is set before any import of torch. Threads that spin for
-# long burn the CPU a neighbour on a shared machine needs, and wait for it in turn: train-vae on
-# two threads beside two busy processes took 2.3x its CPU-seconds alone with OMP_WAIT_POLICY=
-# ACTIVE, 0.9x with PASSIVE (which sleeps at once, but ran 40% longer alone) and 1.1x with
-# this (`socnav-wm bench contention`). Results do not depend on it. Set either to override.
+# long burn the CPU a neighbour on a shared machine needs, and wait for it in turn. On two
+# threads beside two busy processes (`socnav-wm bench contention --threads 2 --hogs 2`), the
+# CPU-seconds over those alone were, for train-vae and train-agent: 1.72x and 1.92x with 10,000
+# spins; 0.97x and 0.87x with none (OMP_WAIT_POLICY=PASSIVE alone), but train-agent then took
+# 29.6 s alone instead of 18.0; 1.09x and 1.12x with this, 21.4 s alone (docs/performance.md).
+# Results do not depend on it. Set either variable to override.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-os.environ.setdefault("GOMP_SPINCOUNT", "10000")
+os.environ.setdefault("GOMP_SPINCOUNT", "1000")
 
 app = typer.Typer(
     name="socnav-wm",
