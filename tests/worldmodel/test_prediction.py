@@ -88,13 +88,13 @@ def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_
                             scenario_seed=3, warmup=2, horizon=3, epsilon=1.5)  # fmt: skip
 
 
-def _planning_models(count: int, perturbed: bool):
+def _planning_models(count: int, perturbed: bool, max_speed: float | None = None):
     from pipeline.worldmodel.residual import ResidualDynamics
 
     models = []
     for seed in range(count):
         torch.manual_seed(seed)
-        model = ResidualDynamics(ENV.num_humans, 8, ENV.dt)
+        model = ResidualDynamics(ENV.num_humans, 8, ENV.dt, max_speed)
         if perturbed:  # the untrained model is constant velocity; this one is not
             torch.nn.init.normal_(model.net[-1].weight, std=0.5)
         models.append(model)
@@ -115,6 +115,13 @@ def test_the_untrained_planning_model_is_constant_velocity_on_every_seed(recordi
     versus = errors["planning_model"]
     assert versus["seeds"] == 3 and versus["verdict"] == ["no different"] * 6
     assert max(abs(d) for d in versus["difference"]) < 1e-9
+    # With the speed cap it differs by rounding only, the same on every seed: still no different.
+    capped = _planning_models(3, False, ENV.human_max_speed)
+    versus = prediction_errors(recording, ENV, warmup=3, horizon=6, planning_models=capped)[
+        "planning_model"
+    ]
+    assert max(abs(d) for d in versus["difference"]) < 1e-4
+    assert versus["verdict"] == ["no different"] * 6
 
 
 def test_a_perturbed_planning_model_is_measured_worse_and_batch_size_does_not_matter(
