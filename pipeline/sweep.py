@@ -17,10 +17,10 @@ Layout (``runs_dir``: ``data/studies/<name>``, ``out_dir``: ``reports/studies/<n
     out_dir/summary.md                                 means and 95% intervals over seeds
     out_dir/figures/<key>.png                          each metric against each grid parameter
 
-A run whose ``result.json`` carries the same fingerprint (its resolved parameters, and the world
-model's files when its variant reads them) is skipped; an unfinished one resumes from its
-checkpoint; a failed one is reported with its error and does not stop the others. Only this
-module imports ray, and only inside :func:`run_sweep`.
+A run whose ``result.json`` carries the same fingerprint (its resolved parameters, the source
+files it executes, and the world model's files when its variant reads them) is skipped; an
+unfinished one resumes from its checkpoint; a failed one is reported with its error and does not
+stop the others. Only this module imports ray, and only inside :func:`run_sweep`.
 """
 
 from __future__ import annotations
@@ -67,6 +67,8 @@ SUMMARY_METRICS = (
     "train_cpu_s",
 )
 _RUN_SECTIONS = ("env", "agent", "eval")  # what train-agent and evaluate read
+# The stages a run executes: their import closures are the source files in its fingerprint.
+_RUN_MODULES = ("pipeline.stages.train_agent", "pipeline.stages.evaluate")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -180,6 +182,24 @@ def _file_digest(path: Path) -> str:
     return digest.hexdigest()
 
 
+def run_sources() -> list[str]:
+    """The repository-relative source files a run executes (train-agent's and evaluate's import
+    closures): an edit of any of them (the reward, the learner) makes every finished run stale,
+    an edit elsewhere (this module, the report) keeps them."""
+    from pipeline.stages.deps import import_closure
+
+    return sorted({path for module in _RUN_MODULES for path in import_closure(module)})
+
+
+def _sources_digest(files: Sequence[str]) -> str:
+    from pipeline.stages.deps import PACKAGE_ROOT
+
+    digest = hashlib.sha256()
+    for name in files:
+        digest.update(f"{name}\0{_file_digest(PACKAGE_ROOT.parent / name)}\0".encode())
+    return digest.hexdigest()
+
+
 def plan_sweep(
     name: str,
     study: StudyParams,
@@ -213,6 +233,7 @@ def plan_sweep(
     from pipeline.agents.features import VARIANTS
 
     digests = {"vae": _file_digest(vae), "lstm": _file_digest(lstm)}
+    code = _sources_digest(run_sources())
     plan_params: dict[RunSpec, Params] = {}
     fingerprints: dict[RunSpec, str] = {}
     for run in runs:
@@ -226,6 +247,7 @@ def plan_sweep(
         identity = {
             "variant": run.variant,
             "seed": run.seed,
+            "code": code,
             "params": {section: data[section] for section in _RUN_SECTIONS},
             **(digests if VARIANTS[run.variant].needs_world_model else {}),
         }

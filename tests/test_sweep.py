@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -28,6 +29,7 @@ from pipeline.sweep import (
     parse_grid,
     parse_seeds,
     plan_sweep,
+    run_sources,
     study_from_options,
 )
 from pipeline.worldmodel.training import save_lstm, save_vae
@@ -146,6 +148,27 @@ def test_only_the_runs_that_read_the_world_model_depend_on_its_files(sweepdir: P
     after = plan_sweep("s", study).fingerprints
     changed = {run.variant for run in before if before[run] != after[run]}
     assert changed == {"maspm"}  # dueling-dqn's runs are kept across a new world model
+
+
+def test_an_edit_of_the_code_a_run_executes_makes_its_result_stale(
+    sweepdir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import pipeline.stages.deps as deps
+
+    sources = run_sources()
+    assert "pipeline/env/reward.py" in sources and "pipeline/agents/learner.py" in sources
+    assert "pipeline/sweep.py" not in sources and "pipeline/stages/report.py" not in sources
+    copy = tmp_path / "src" / "pipeline"
+    shutil.copytree(deps.PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(deps, "PACKAGE_ROOT", copy)
+    study = StudyParams(variants=["dueling-dqn", "maspm"], seeds=[0, 1])
+    before = plan_sweep("s", study).fingerprints
+    for outside in ("sweep.py", "stages/report.py"):  # code no run executes
+        (copy / outside).write_text((copy / outside).read_text() + "# an edit\n")
+    assert plan_sweep("s", study).fingerprints == before
+    (copy / "env" / "reward.py").write_text((copy / "env" / "reward.py").read_text() + "# x\n")
+    after = plan_sweep("s", study).fingerprints
+    assert all(after[run] != before[run] for run in before)
 
 
 def test_a_bad_grid_fails_in_one_line_before_any_run(sweepdir: Path) -> None:
