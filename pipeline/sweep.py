@@ -20,7 +20,9 @@ Layout (``runs_dir``: ``data/studies/<name>``, ``out_dir``: ``reports/studies/<n
 A run whose ``result.json`` carries the same fingerprint (its resolved parameters, the source
 files it executes, and the world model's files when its variant reads them) is skipped; an
 unfinished one resumes from its checkpoint; a failed one is reported with its error and does not
-stop the others. Only this module imports ray, and only inside :func:`run_sweep`.
+stop the others. A run that another study (a sibling of ``runs_dir``) finished with the same
+fingerprint is copied, not trained again: the horizon study's horizon-2 cells are the seeds
+study's 2stepahead runs. Only this module imports ray, and only inside :func:`run_sweep`.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import json
 import math
 import os
 import re
+import shutil
 import statistics
 import sys
 import time
@@ -172,6 +175,37 @@ class SweepPlan:
         metrics = result.get("metrics", {})
         result["metrics"] = {k: math.nan if v is None else v for k, v in metrics.items()}
         return result
+
+    def adopt(self, run: RunSpec) -> dict[str, Any] | None:
+        """Copy the run that another study under ``runs_dir``'s parent finished with this run's
+        fingerprint (the same training and evaluation, bit for bit) into this run's folder, and
+        return its result (None if no study has it)."""
+        from pipeline.io import write_json_atomic
+
+        own = self.runs_dir.resolve()
+        for path in sorted(self.runs_dir.parent.glob(f"*/*/{RESULT_FILE}")):
+            if path.parent.parent.resolve() == own or path.parent.name.endswith(".copying"):
+                continue
+            try:
+                result = json.loads(path.read_text())
+            except (OSError, ValueError):
+                continue
+            if (
+                result.get("fingerprint") != self.fingerprints[run]
+                or result.get("status") != "done"
+            ):
+                continue
+            target = self.run_dir(run)
+            staging = target.with_name(f"{target.name}.copying")
+            shutil.rmtree(staging, ignore_errors=True)
+            shutil.copytree(path.parent, staging)
+            result.update(run=run.name, grid=dict(run.values), copied_from=str(path.parent))
+            write_json_atomic(staging / RESULT_FILE, result)
+            if target.is_dir():  # an unfinished run's files
+                shutil.rmtree(target)
+            staging.rename(target)
+            return self.finished(run)
+        return None
 
 
 def _file_digest(path: Path) -> str:
@@ -467,16 +501,21 @@ def run_sweep(
     started = time.time()
     outcome = SweepResult(plan)
     todo = []
+    copied = 0
     for run in plan.runs:
         recorded = plan.finished(run)
+        if recorded is None:
+            recorded = plan.adopt(run)
+            copied += recorded is not None
         if recorded is not None:
             outcome.results[run] = recorded
         else:
             todo.append(run)
     outcome.skipped = len(plan.runs) - len(todo)
+    from_others = f" ({copied} copied from other studies)" if copied else ""
     say(
-        f"sweep {plan.name}: {len(plan.runs)} runs, {outcome.skipped} already finished, "
-        f"{len(todo)} to run"
+        f"sweep {plan.name}: {len(plan.runs)} runs, {outcome.skipped} already finished"
+        f"{from_others}, {len(todo)} to run"
     )
     if todo:
         ray = _import_ray()

@@ -288,6 +288,24 @@ def test_a_sweep_on_local_ray_equals_the_serial_runs_and_survives_a_failure(
     result = runner.invoke(app, [*args, "--no-tracking"])
     assert "8 already finished, 0 to run" in result.output
 
+    # Another study holding two of these runs copies them instead of training them again.
+    other = [
+        "sweep", "--variants", "dueling-dqn", "--seeds", "0-1", "--grid", "agent.gamma=0.9",
+        "--name", "other", "--cpus", "2", "--no-tracking",
+    ]  # fmt: skip
+    result = runner.invoke(app, other)
+    assert result.exit_code == 0, result.output
+    assert "2 already finished (2 copied from other studies), 0 to run" in result.output
+    copied = Path("data/studies/other/dueling-dqn__agent.gamma=0.9__seed-1")
+    recorded = json.loads((copied / "result.json").read_text())
+    assert recorded["run"] == "dueling-dqn/agent.gamma=0.9/seed-1"
+    assert recorded["copied_from"].endswith("tiny/dueling-dqn__agent.gamma=0.9__seed-1")
+    ours = _weights(copied / "agents" / "dueling-dqn" / "seed-1.pt")
+    serial = _weights(Path("serial") / "dueling-dqn" / "seed-1.pt")
+    assert all(torch.equal(ours[key], serial[key]) for key in serial)
+    rows = pq.read_table("reports/studies/other/results.parquet").to_pylist()
+    assert [row["status"] for row in rows] == ["done", "done"]
+
 
 def test_an_interrupted_sweep_resumes_from_its_checkpoints(sweepdir: Path) -> None:
     params = tiny_params()
