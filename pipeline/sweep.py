@@ -683,11 +683,13 @@ def write_results(outcome: SweepResult) -> list[Path]:
         pq.write_table(table, tmp)
     summary_path = plan.out_dir / "summary.md"
     verdict = horizon_verdict(outcome)
-    write_text_atomic(summary_path, _summary(outcome, verdict))
+    training = training_claims(outcome)
+    write_text_atomic(summary_path, _summary(outcome, verdict, training))
     written = [results_path, summary_path]
-    if verdict is not None:  # for machines: the claim, each comparison, the verdict
+    found = verdict if verdict is not None else training
+    if found is not None:  # for machines: each claim, its comparisons, its verdict
         written.append(plan.out_dir / "claims.json")
-        write_text_atomic(written[-1], json.dumps(verdict, indent=2) + "\n")
+        write_text_atomic(written[-1], json.dumps(found, indent=2) + "\n")
     return [*written, *_figures(outcome)]
 
 
@@ -705,7 +707,11 @@ def _fmt(value: float, name: str) -> str:
     return f"{value:.3g}"
 
 
-def _summary(outcome: SweepResult, verdict: dict[str, Any] | None) -> str:
+def _summary(
+    outcome: SweepResult,
+    verdict: dict[str, Any] | None,
+    training: list[dict[str, Any]] | None = None,
+) -> str:
     plan = outcome.plan
     groups = _groups(outcome)
     done = sum(len(v) for v in groups.values())
@@ -744,6 +750,11 @@ def _summary(outcome: SweepResult, verdict: dict[str, Any] | None) -> str:
     if verdict is not None:
         lines += ["", "## The paper's horizon claim", "", f"> {HORIZON_CLAIM}", ""]
         lines += [*verdict["comparisons"], "", f"**Verdict: {verdict['verdict']}.**"]
+    if training is not None:
+        lines += ["", "## The paper's training claims", "", TRAINING_CLAIMS_NOTE, ""]
+        for claim in training:
+            lines.append(f"- **{claim['verdict'].upper()}**: {claim['statement']}")
+            lines += [f"  - {check['status']}: {check['evidence']}" for check in claim["checks"]]
     lines += ["", *[f"![{key}](figures/{_figure_name(key)})" for key in plan.grid_keys]]
     return "\n".join(lines).rstrip() + "\n"
 
@@ -817,6 +828,47 @@ def horizon_verdict(outcome: SweepResult, alpha: float = 0.05) -> dict[str, Any]
     else:
         verdict = "holds: no horizon above 2 succeeds more, and every one trains slower"
     return {"claim": HORIZON_CLAIM, "comparisons": lines, "verdict": verdict}
+
+
+TRAINING_CLAIMS_NOTE = (
+    "Checked as the report checks them (`pipeline/evaluation/claims.py`), on this study's "
+    "seeds: per-seed final smoothed training return or episodes to solve, Mann–Whitney, Holm "
+    "within each claim."
+)
+
+
+def training_claims(outcome: SweepResult) -> list[dict[str, Any]] | None:
+    """The paper's training claims (``training-…`` in :data:`pipeline.evaluation.paper.CLAIMS`)
+    checked on a study without a grid (one run per variant and seed, like the pipeline's, with
+    more seeds), from its runs' training logs, with the report's rules and the report section's
+    window and α; None for a study with a grid or fewer than two variants finished."""
+    plan = outcome.plan
+    if plan.grid_keys:
+        return None
+    import pyarrow.parquet as pq
+
+    from pipeline.evaluation.claims import check_claims
+    from pipeline.evaluation.paper import CLAIMS
+    from pipeline.evaluation.report import training_summary
+
+    logs: dict[str, dict[int, Any]] = {}
+    for run in plan.runs:
+        result = outcome.results.get(run)
+        if result and result.get("status") == "done":
+            path = plan.run_dir(run) / "training" / run.variant / f"seed-{run.seed}.parquet"
+            logs.setdefault(run.variant, {})[run.seed] = pq.read_table(path)
+    if len(logs) < 2:
+        return None
+    params = plan.params[plan.runs[0]]
+    summary = training_summary(
+        logs,
+        window=params.report.smoothing_window,
+        solved_window=params.agent.solved_window,
+        solved_success_rate=params.agent.solved_success_rate,
+    )
+    claims = [c for c in CLAIMS if c.kind in ("training-better", "training-fastest")]
+    results = check_claims({}, {}, summary, claims=claims, alpha=params.report.alpha)
+    return [{"id": result.claim.claim_id, **result.to_dict()} for result in results]
 
 
 def _figure_name(key: str) -> str:

@@ -31,6 +31,8 @@ from pipeline.sweep import (
     plan_sweep,
     run_sources,
     study_from_options,
+    training_claims,
+    write_results,
 )
 from pipeline.worldmodel.training import save_lstm, save_vae
 from tests.agents.conftest import tiny_world_model
@@ -113,6 +115,45 @@ def test_the_horizon_claim_is_checked_on_paired_seeds(sweepdir: Path) -> None:
     # Not a horizon study: no verdict.
     other = plan_sweep("g", StudyParams(variants=["maspm"], seeds=[0], grid={"agent.gamma": [0.9]}))
     assert horizon_verdict(SweepResult(other)) is None
+
+
+def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> None:
+    import pyarrow as pa
+
+    variants = ["dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm", "2stepahead-maspm"]
+
+    def claims(seeds: list[int]) -> dict[str, str]:
+        plan = plan_sweep("seeds", StudyParams(variants=variants, seeds=seeds))
+        outcome = SweepResult(plan)
+        for run in plan.runs:
+            # 2stepahead succeeds from its 50th episode on, the others from their 150th; the
+            # world-model variants end at a higher return than dueling-dqn, 2stepahead-maspm
+            # at the highest.
+            first = 50 if run.variant == "2stepahead" else 150
+            final = {"dueling-dqn": 0.2, "2stepahead-maspm": 0.9}.get(run.variant, 0.5)
+            success = [episode >= first + run.seed for episode in range(300)]
+            returns = [final + 0.01 * run.seed if episode >= 100 else 0.0 for episode in range(300)]
+            path = plan.run_dir(run) / "training" / run.variant / f"seed-{run.seed}.parquet"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            pq.write_table(pa.table({"return": returns, "success": success}), path)
+            outcome.results[run] = {"status": "done", "metrics": {"success": 0.9}}
+        write_results(outcome)
+        found = json.loads((plan.out_dir / "claims.json").read_text())
+        assert "## The paper's training claims" in (plan.out_dir / "summary.md").read_text()
+        return {claim["id"]: claim["verdict"] for claim in found}
+
+    assert claims([0, 1, 2, 3, 4]) == {
+        "training-twostep-maspm-highest": "reproduced",
+        "training-world-models-higher": "reproduced",
+        "training-twostep-fastest": "reproduced",
+    }
+    # Three seeds a side cannot decide them (Mann–Whitney's smallest p is 0.1).
+    assert set(claims([0, 1, 2]).values()) == {"inconclusive"}
+    # A study with a grid mixes its grid values' seeds: no training claims.
+    grid = plan_sweep(
+        "g", StudyParams(variants=variants[:2], seeds=[0], grid={"agent.gamma": [0.9]})
+    )
+    assert training_claims(SweepResult(grid)) is None
 
 
 def test_a_study_is_validated_like_every_section(tmp_path: Path) -> None:
