@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipeline.evaluation import paper
-from pipeline.evaluation.comparisons import PairedComparison
+from pipeline.evaluation.comparisons import PairedComparison, compare
 from pipeline.evaluation.evaluate import BASELINE_SEED, METHODS
 from pipeline.metrics import ALL_METRICS, METRIC_DIRECTIONS, METRIC_UNITS, PAPER_METRICS
 
@@ -180,9 +180,12 @@ def render_summary(
     smoothing_window: int,
     alpha: float,
     prediction: Mapping[str, Any] | None = None,
+    planning_horizons: Mapping[str, int] | None = None,
 ) -> str:
     """The text of ``summary.md``: tables, comparisons, Pareto set, the paper, claims, the world
-    model's prediction errors (``prediction``, from ``socnav-wm predict``), figures."""
+    model's prediction errors (``prediction``, from ``socnav-wm predict``), the planners against
+    their ceiling (explained by the prediction errors at each planner's horizon,
+    ``planning_horizons``), figures."""
     lines: list[str] = ["# socnav-wm: evaluation report", ""]
     present = list(evaluations)
     seeds_text = ", ".join(
@@ -347,6 +350,7 @@ def render_summary(
     lines += ["", f"> {paper.BASELINE_NOTE}", ""]
     if prediction is not None:
         lines += prediction_section(prediction)
+    lines += planning_section(evaluations, summaries, prediction, planning_horizons or {})
 
     # -- figures -------------------------------------------------------------------------------
     lines += ["## Figures", ""]
@@ -548,6 +552,97 @@ def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
                 f"[{low:+.4f}, {high:+.4f}].",
                 "",
             ]
+    return lines
+
+
+CEILING = "oracle-mpc"
+MODEL_PLANNERS = {
+    "cv-mpc": "constant-velocity",
+    "wm-mpc": "planning-model",
+    "vae-lstm-mpc": "vae-lstm",
+}
+"""The planners that plan on a model of the observation, and the predictor of ``socnav-wm
+predict`` that is their model."""
+
+
+def planning_section(
+    evaluations: Mapping[str, MethodEvaluation],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    prediction: Mapping[str, Any] | None,
+    horizons: Mapping[str, int],
+) -> list[str]:
+    """The planners against ``oracle-mpc`` (same planner, the simulator as its model): how far
+    each is from that ceiling, paired scenario by scenario, and the k-step errors of its model
+    at its horizon (``horizons``: planner → steps; default the longest predicted) that explain
+    the gap. Empty without the ceiling."""
+    planners = [m for m in MODEL_PLANNERS if m in evaluations]
+    if CEILING not in evaluations or not planners:
+        return []
+    lines = [
+        "## Planning: the ceiling, and what keeps the models from it",
+        "",
+        f"`{CEILING}` plans with the same candidates and cost on the simulator itself (with "
+        "random draws of its own): what the four actions and this planner allow on these "
+        "scenarios. Each planner below plans on a model of the observation; its difference from "
+        "the ceiling is paired scenario by scenario (95% interval, p of the paired test).",
+        "",
+    ]
+    rows = []
+    for method in [CEILING, *planners]:
+        row = [method]
+        for metric in ("success", "human_collision"):
+            cell = fmt_ci(metric, summaries[method][metric])
+            if method != CEILING:
+                c = compare(evaluations[method].episodes, evaluations[CEILING].episodes, metric)
+                cell += (
+                    f"; {c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, {c.high * 100:+.1f}], "
+                    f"p = {fmt_p(c.p_value)}"
+                )
+            row.append(cell)
+        rows.append(row)
+    header = ["planner", "success; against the ceiling", "human collisions; against the ceiling"]
+    lines += _table(header, rows) + [""]
+    collided = summaries[CEILING]["human_collision"]["mean"]
+    lines.append(
+        f"- `{CEILING}` itself collides with a human in {collided:.1%} of the episodes: with "
+        "the simulator as its model the planner does not avoid those, so a better model of the "
+        "humans cannot either."
+    )
+    if prediction is None or "random" not in prediction["policies"]:
+        return lines
+    errors = prediction["policies"]["random"]
+    longest = max(errors["k"])
+
+    def step(planner: str) -> int | None:
+        k = min(horizons.get(planner, longest), longest)
+        return errors["k"].index(k) if k in errors["k"] else None
+
+    parts = []
+    for planner in planners:
+        name, i = MODEL_PLANNERS[planner], step(planner)
+        if i is not None and name in errors["predictors"]:
+            error = errors["predictors"][name]["humans"][i]
+            parts.append(f"`{planner}` ({name}) {error:.3f} m at k = {errors['k'][i]}")
+    if parts:
+        lines.append(
+            "- The humans' mean position error of each planner's model at its horizon (random "
+            "policy, as in the prediction section): " + "; ".join(parts) + "."
+        )
+    change = errors.get("goal_change")
+    cv = change["predictors"].get("constant-velocity") if change else None
+    i = step("cv-mpc")
+    if cv and i is not None:
+        share = change["changed_share"][i]
+        overall = errors["predictors"]["constant-velocity"]["humans"][i]
+        from_changes = share * cv["changed"][i] / overall if overall > 0 else math.nan
+        lines.append(
+            f"- At k = {errors['k'][i]}, {from_changes:.0%} of constant velocity's error comes "
+            f"from the {share:.0%} of the humans who drew a new goal within those steps: goals "
+            "are not in the observation, so no model of it foresees those turns. The rest, "
+            f"{cv['kept'][i]:.3f} m for the humans who kept their goal, is what a learned model "
+            "could still win."
+        )
+    lines.append("")
     return lines
 
 

@@ -347,6 +347,7 @@ def build_report(
     gif_max_frames: int = 60,
     documents: Sequence[str | Path] = (),
     prediction_path: str | Path | None = None,
+    planning_horizons: Mapping[str, int] | None = None,
 ) -> ReportResult:
     """Write the report of every evaluated method (see the module docstring).
 
@@ -371,6 +372,9 @@ def build_report(
             (:func:`~pipeline.evaluation.rendering.replace_marked_block`) gets the results table.
         prediction_path: the world model's prediction errors (``metrics/prediction.json`` of
             ``socnav-wm predict``), reported when given.
+        planning_horizons: each planner's horizon (``planning``, resolved per method), where
+            the planning section reads its model's prediction errors (default: the longest
+            predicted).
 
     Returns:
         A :class:`ReportResult`.
@@ -484,6 +488,7 @@ def build_report(
         smoothing_window=smoothing_window,
         alpha=alpha,
         prediction=_read_prediction(prediction_path),
+        planning_horizons=planning_horizons,
     )
     summary_path = out_dir / "summary.md"
     pareto_path = out_dir / "pareto.json"

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from pipeline.config import Params
 from pipeline.evaluation.report import build_report
+from pipeline.planning.params import PLANNER_NAMES
 from pipeline.stages.common import open_stage
 
 RESULTS_DOCUMENTS = (Path("README.md"), Path("docs/evaluation.md"))
@@ -42,6 +43,9 @@ def run(
             alpha=r.alpha,
             documents=documents,
             prediction_path=prediction if prediction is not None and prediction.is_file() else None,
+            planning_horizons={
+                method: params.planning.resolved(method).horizon for method in PLANNER_NAMES
+            },
         )
         for claim, verdict in result.verdicts.items():
             run.set_tag(f"claim.{claim}", verdict)

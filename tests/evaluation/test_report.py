@@ -544,3 +544,40 @@ def test_training_summary_and_logs(tmp_path):
     assert entry["episodes_to_solve"][4] == 14
     summary = training_summary(logs, window=20)
     assert summary["maspm"]["plateau"][4] == pytest.approx(0.5)
+
+
+def test_the_planners_are_measured_against_their_ceiling_and_explained():
+    from pipeline.evaluation.evaluate import summarise
+    from pipeline.evaluation.rendering import planning_section
+
+    n = 40
+    hits = np.zeros(n)
+    hits[:2] = 1.0
+    ceiling = _episodes("oracle-mpc", (BASELINE_SEED,), n, success=1 - hits, human_collision=hits)
+    cv_success = np.ones(n)
+    cv_success[:12] = 0.0  # 12 of 40 scenarios lost: the ceiling's 2 and 10 more
+    planner = _episodes("cv-mpc", (BASELINE_SEED,), n, success=cv_success, human_collision=hits)
+    evaluations = {"oracle-mpc": _evaluation(ceiling), "cv-mpc": _evaluation(planner)}
+    summaries = {m: summarise(e.episodes, ALL_METRICS) for m, e in evaluations.items()}
+    prediction = {
+        "policies": {
+            "random": {
+                "k": [1, 2],
+                "predictors": {"constant-velocity": {"humans": [0.01, 0.2]}},
+                "goal_change": {
+                    "changed_share": [0.0, 0.1],
+                    "predictors": {
+                        "constant-velocity": {"changed": [0.0, 1.5], "kept": [0.01, 0.05]}
+                    },
+                },
+            }
+        }
+    }
+    text = "\n".join(planning_section(evaluations, summaries, prediction, {"cv-mpc": 2}))
+    assert "| oracle-mpc | 95.0% [" in text
+    assert "| cv-mpc | 70.0% [" in text and "; -25.0 pp [" in text  # paired, scenario by scenario
+    assert "`oracle-mpc` itself collides with a human in 5.0% of the episodes" in text
+    assert "`cv-mpc` (constant-velocity) 0.200 m at k = 2" in text
+    # 0.1 × 1.5 of the 0.2 m: three quarters of the error is the humans who drew a new goal.
+    assert "At k = 2, 75% of constant velocity's error comes from the 10% of the humans" in text
+    assert planning_section({"cv-mpc": evaluations["cv-mpc"]}, summaries, prediction, {}) == []
