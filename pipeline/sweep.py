@@ -70,8 +70,11 @@ SUMMARY_METRICS = (
     "train_cpu_s",
 )
 _RUN_SECTIONS = ("env", "agent", "eval")  # what train-agent and evaluate read
-# The stages a run executes: their import closures are the source files in its fingerprint.
+# The stages a run executes: their import closures are the source files in its fingerprint,
+# but for the configuration module, which acts on a run only through the resolved parameters
+# (in the fingerprint themselves): a new section or a new error message keeps the runs.
 _RUN_MODULES = ("pipeline.stages.train_agent", "pipeline.stages.evaluate")
+_NOT_RUN_SOURCES = frozenset({"pipeline/config.py"})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,7 +225,8 @@ def run_sources() -> list[str]:
     an edit elsewhere (this module, the report) keeps them."""
     from pipeline.stages.deps import import_closure
 
-    return sorted({path for module in _RUN_MODULES for path in import_closure(module)})
+    files = {path for module in _RUN_MODULES for path in import_closure(module)}
+    return sorted(files - _NOT_RUN_SOURCES)
 
 
 def _sources_digest(files: Sequence[str]) -> str:

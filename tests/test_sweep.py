@@ -199,6 +199,7 @@ def test_an_edit_of_the_code_a_run_executes_makes_its_result_stale(
     sources = run_sources()
     assert "pipeline/env/reward.py" in sources and "pipeline/agents/learner.py" in sources
     assert "pipeline/sweep.py" not in sources and "pipeline/stages/report.py" not in sources
+    assert "pipeline/config.py" not in sources  # it acts through the parameters, fingerprinted
     copy = tmp_path / "src" / "pipeline"
     shutil.copytree(deps.PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
     monkeypatch.setattr(deps, "PACKAGE_ROOT", copy)
