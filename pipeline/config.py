@@ -632,14 +632,7 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "predict": ("env", "prediction", "planning_model.seeds"),
     "report": ("env", "eval", "report", "agent.solved_window", "agent.solved_success_rate"),
     "study_horizon": ("env", "eval", "agent", "studies.horizon"),
-    "study_seeds": (
-        "env",
-        "eval",
-        "agent",
-        "report.alpha",
-        "report.smoothing_window",
-        "studies.seeds",
-    ),
+    "study_seeds": ("env", "eval", "agent", "studies.seeds"),
     "study_sort_humans": ("env", "eval", "agent", "studies.sort_humans"),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
