@@ -604,9 +604,9 @@ def planning_section(
     lines += _table(header, rows) + [""]
     collided = summaries[CEILING]["human_collision"]["mean"]
     lines.append(
-        f"- `{CEILING}` itself collides with a human in {collided:.1%} of the episodes: with "
-        "the simulator as its model the planner does not avoid those, so a better model of the "
-        "humans cannot either."
+        f"- `{CEILING}` itself collides with a human in {collided:.1%} of the episodes: "
+        "knowing the humans' rules, though not their future random draws, the planner does "
+        "not avoid those."
     )
     if prediction is None or "random" not in prediction["policies"]:
         return lines
