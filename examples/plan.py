@@ -46,7 +46,11 @@ def main(argv: list[str] | None = None) -> dict[str, int]:
     planner = Planner(model, params, env_params)
     # Every episode at once: the planner imagines episodes x candidates futures per step.
     episodes = run_episodes(
-        env_params, planner.policy(), args.scenario_seed, np.arange(args.episodes)
+        env_params,
+        planner.policy(),
+        args.scenario_seed,
+        np.arange(args.episodes),
+        reads_simulator=planner.reads_simulator,  # the robot's pose, for the walls
     )
     counts = {"success": 0, "human_collision": 0, "wall_collision": 0, "timeout": 0}
     for episode in episodes:

@@ -91,4 +91,5 @@ def planner_policy(
         model = VaeLstmModel(load_vae(files["vae"]), load_lstm(files["lstm"]))
     else:
         raise ValueError(f"unknown planner {method!r}; expected one of {', '.join(PLANNER_NAMES)}")
-    return Planner(model, planning, env_params).policy(), False
+    planner = Planner(model, planning, env_params)
+    return planner.policy(), planner.reads_simulator

@@ -16,12 +16,17 @@ At every step, for every episode at once:
    plan is made afresh at the next step.
 
 Walls are not in the observation, so a model that predicts from observations does not see them.
+With ``walls`` (the default) the planner itself knows the room and the robot's pose in it, as a
+robot with a map and localisation does: it moves the imagined robot by the unicycle update of
+each candidate action, and a step that brings it within its radius of a wall is a collision
+(the simulator's test). The models still predict only the goal and the humans.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -29,6 +34,7 @@ from pipeline.env.core import NUM_ACTIONS
 from pipeline.env.params import EnvParams
 from pipeline.planning.models import PlanningModel
 from pipeline.planning.params import PlanningParams
+from pipeline.worldmodel.ego import commands_of
 
 STOP, FORWARD, LEFT, RIGHT = range(NUM_ACTIONS)
 
@@ -109,10 +115,11 @@ class Planner:
         self.prefixes = prefixes(params.prefix_length)
         self.num_candidates = len(self.prefixes) * len(params.continuations)
 
-    def scores(self, goal_now: np.ndarray) -> np.ndarray:
+    def scores(self, goal_now: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
         """(N, candidates) predicted returns from the model's present, where the goal is at
         ``goal_now`` (N, 2) in the robot frame; candidate ``p · len(continuations) + c`` is
-        prefix ``p`` followed by continuation ``c``."""
+        prefix ``p`` followed by continuation ``c``. With ``pose`` (N, 3: the robot's x, y, θ
+        in the room), touching a wall is a collision."""
         p, e = self.params, self.env_params
         num_episodes = len(goal_now)
         s = self.num_candidates
@@ -123,6 +130,8 @@ class Planner:
         goal = np.repeat(np.asarray(goal_now, dtype=np.float64), s, axis=0)
         goal_distance = np.hypot(goal[:, 0], goal[:, 1])
         contact = e.robot_radius + e.human_radius + p.safety_margin
+        wall_limit = e.wall_half_size - e.robot_radius - p.safety_margin
+        robot = None if pose is None else np.repeat(np.asarray(pose, dtype=np.float64), s, axis=0)
         for k in range(p.horizon):
             actions = candidate_actions(self.prefixes, p.continuations, k, goal, e)
             predicted = rollout.step(actions)
@@ -130,6 +139,12 @@ class Planner:
             new_goal_distance = np.hypot(goal[:, 0], goal[:, 1])
             centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
             collided = centre < contact
+            if robot is not None:
+                v, w = commands_of(actions, e)
+                robot[:, 2] += w * e.dt
+                robot[:, 0] += v * e.dt * np.cos(robot[:, 2])
+                robot[:, 1] += v * e.dt * np.sin(robot[:, 2])
+                collided |= np.abs(robot[:, :2]).max(axis=1) >= wall_limit
             reached = ~collided & (new_goal_distance < e.success_distance)
             score += np.where(
                 alive,
@@ -141,26 +156,42 @@ class Planner:
             goal_distance = new_goal_distance
         return score.reshape(num_episodes, s)
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
+    def act(self, obs: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
         """The first action (N,) of each episode's best candidate, from the model's present
-        (whose observation is ``obs``)."""
-        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2])
+        (whose observation is ``obs``; ``pose`` (N, 3): the robot's in the room, for the
+        walls)."""
+        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2], pose)
         best = scores.argmax(axis=1)  # the first of equal scores
         return self.prefixes[best // len(self.params.continuations), 0]
 
-    def policy(self) -> Callable[[np.ndarray], np.ndarray]:
-        """A policy ``obs (N, obs_dim) → actions (N,)`` for episodes that start together (what
-        :func:`pipeline.env.rollout.run_episodes` calls): its first call starts the model on
+    @property
+    def reads_simulator(self) -> bool:
+        """Whether :meth:`policy` takes the simulator (for the robot's pose: ``walls``) rather
+        than the observations."""
+        return self.params.walls
+
+    def policy(self) -> Callable[[Any], np.ndarray]:
+        """A policy for episodes that start together (what
+        :func:`pipeline.env.rollout.run_episodes` calls): ``obs (N, obs_dim) → actions (N,)``,
+        or with ``walls`` ``simulator → actions``, which reads the observations and the robot's
+        pose (and nothing else of the simulator's state). Its first call starts the model on
         the episodes, every later call is their next step."""
         last: list[np.ndarray] = []
 
-        def act(obs: np.ndarray) -> np.ndarray:
+        def act(obs: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
             if last:
                 self.model.observe(obs, last[0])
             else:
                 self.model.reset(obs)
-            actions = self.act(obs)
+            actions = self.act(obs, pose)
             last[:] = [actions]
             return actions
 
-        return act
+        if not self.params.walls:
+            return act
+
+        def localised(sim: Any) -> np.ndarray:
+            state = sim.state
+            return act(sim.observation, np.column_stack([state.robot_xy, state.robot_theta]))
+
+        return localised

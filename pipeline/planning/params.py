@@ -72,6 +72,10 @@ class PlanningParams(Section):
     """Weight of each step's progress towards the goal (metres)."""
     safety_margin: float = _finite(0.0, ge=0)
     """Added to the radii when testing a predicted contact (m)."""
+    walls: bool = True
+    """The planner knows the room and the robot's pose in it (a map and localisation, which
+    the ORCA and SFM robots and ``oracle-mpc`` have too): a candidate whose imagined robot
+    touches a wall collides there. False: it sees only what the observation shows (no walls)."""
     oracle_seed: int = Field(4_000_037, ge=0)
     """``oracle-mpc``: the seed of its clones' random draws (SFM noticing the robot, the humans'
     new goals), not the episode's: it knows the humans' rules, not their future coin flips."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -55,12 +57,13 @@ def test_constant_velocity_model_rollout_matches_the_predictor() -> None:
 
 def test_planner_advances_on_a_free_path_and_waits_for_a_crossing_human() -> None:
     far = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]
-    free = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV).policy()
+    blind = PlanningParams(walls=False)  # the policy of observations alone
+    free = Planner(ConstantVelocityModel(ENV), blind, ENV).policy()
     assert free(observation((3.0, 0.0), far)).tolist() == [FORWARD]
 
     # A human ahead-left crossing the robot's path at 0.3 m/s: one step forward meets it
     # (0.63 m apart, centre to centre, under the 0.66 m of the two radii); waiting does not.
-    planner = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV)
+    planner = Planner(ConstantVelocityModel(ENV), blind, ENV)
     act = planner.policy()
     first = [(0.7, 0.9), *far[1:]]
     assert act(observation((3.0, 0.0), first)).tolist() == [FORWARD]  # no velocity yet
@@ -73,6 +76,34 @@ def test_planner_advances_on_a_free_path_and_waits_for_a_crossing_human() -> Non
     waiting = scores[prefixes(3)[:, 0] != FORWARD].max()
     assert waiting > forward_first
     assert planner.act(observation((3.0, 0.0), crossing)).tolist() != [FORWARD]
+
+
+def test_a_planner_that_knows_the_walls_counts_a_wall_contact_as_a_collision() -> None:
+    far = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]
+    half = ENV.wall_half_size - ENV.robot_radius
+    pose = np.array([[half - 0.1, 0.0, 0.0]])  # facing the wall, 0.1 m from touching it
+    params = PlanningParams(horizon=1, prefix_length=1, progress_weight=0.0, discomfort_cost=0.0)
+    planner = Planner(ConstantVelocityModel(ENV), params, ENV)
+    planner.model.reset(observation((0.0, -2.0), far))
+    scores = planner.scores(np.array([[0.0, -2.0]]), pose).reshape(4, -1)[:, 0]
+    assert scores[FORWARD] == -params.collision_cost
+    assert np.all(np.delete(scores, FORWARD) == 0.0)
+    # Without the pose (or with walls off) the wall is invisible: forward costs nothing.
+    assert np.all(planner.scores(np.array([[0.0, -2.0]])) == 0.0)
+
+
+def test_the_walls_policy_reads_only_the_observation_and_the_pose() -> None:
+    far = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]
+    half = ENV.wall_half_size - ENV.robot_radius
+    # Facing the wall 0.1 m from touching it, the goal straight ahead beyond it: progress says
+    # forward, the wall says no.
+    state = SimpleNamespace(robot_xy=np.array([[half - 0.1, 0.0]]), robot_theta=np.array([0.0]))
+    sim = SimpleNamespace(observation=observation((1.0, 0.0), far), state=state)
+    blind = Planner(ConstantVelocityModel(ENV), PlanningParams(walls=False), ENV)
+    seeing = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV)
+    assert seeing.reads_simulator and not blind.reads_simulator
+    assert blind.policy()(sim.observation).tolist() == [FORWARD]
+    assert seeing.policy()(sim).tolist() != [FORWARD]
 
 
 def test_cv_mpc_evaluation_runs_once_without_a_training_seed() -> None:
