@@ -239,16 +239,24 @@ class PlanningModelParams(Section):
     """Steps between the starts of consecutive training samples of an episode."""
     hidden_dim: int = Field(64, gt=0)
     """Width of the correction's two hidden layers."""
-    learning_rate: float = Field(1e-4, gt=0, allow_inf_nan=False)
-    """Adam's step."""
-    batch_size: int = Field(256, gt=0)
+    learning_rate: float = Field(3e-3, gt=0, allow_inf_nan=False)
+    """Adam's first step, decayed to zero over ``max_epochs`` (cosine)."""
+    batch_size: int = Field(1024, gt=0)
     """Samples per update."""
-    max_epochs: int = Field(10, gt=0)
+    max_epochs: int = Field(14, gt=0)
     """Epochs at most."""
-    patience: int = Field(3, gt=0)
+    patience: int = Field(5, gt=0)
     """Epochs without a better validation loss before stopping (the best epoch is kept)."""
     val_fraction: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
     """Share of the rollout episodes held out for validation."""
+    relative_weight: float = Field(1.0, ge=0, le=2, allow_inf_nan=False)
+    """Step ``k``'s error counts ``1 / e_k^relative_weight`` in the loss, ``e_k`` being constant
+    velocity's mean error at ``k`` (0: the plain mean, which the last steps' errors, 100× the
+    first ones', decide alone; 1: every step relative to constant velocity)."""
+    room: bool = True
+    """The model knows the room: each person's features include where it is in the room and
+    how far ahead the area where goals are drawn ends (the robot's pose, known to a robot with
+    a map, places them); wm-mpc then needs ``planning.walls``. False: observations only."""
 
     @field_validator("seeds")
     @classmethod

@@ -123,7 +123,7 @@ class Planner:
         p, e = self.params, self.env_params
         num_episodes = len(goal_now)
         s = self.num_candidates
-        rollout = self.model.rollout(s)
+        rollout = self.model.rollout(s, pose)
         batch = num_episodes * s
         score = np.zeros(batch)
         alive = np.ones(batch, dtype=bool)

@@ -65,7 +65,7 @@ class VaeLstmModel:
             _, self._state = self.lstm.step(self._latent, a, self._state)
             self._latent = self._encode(obs)
 
-    def rollout(self, repeats: int) -> Rollout:
+    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
         state = None
         if self._state is not None:
             state = tuple(x.repeat_interleave(repeats, dim=0) for x in self._state)

@@ -58,6 +58,8 @@ def run(
                 batch_size=p.batch_size,
                 max_epochs=p.max_epochs,
                 patience=p.patience,
+                room=p.room,
+                relative_weight=p.relative_weight,
                 on_epoch=epoch_logger(run, bar),
             )
         summary: dict[str, Any] = {"seed": seed, **result.metrics}
@@ -70,6 +72,8 @@ def run(
         points = torch.zeros(1, 1 + result.model.num_humans, 2)
         speeds = {"v": torch.zeros(1), "omega": torch.zeros(1)}
         motion = {"points": points, "velocity": points, **speeds}
+        if p.room:
+            motion["pose"] = torch.zeros(1, 3)
         log_torch_model(run, result.model, motion, ("velocity_change",))
     m = result.metrics
     return (

@@ -58,12 +58,15 @@ class Recording:
         stepped: (T, N) bool, step ``t`` was a real step of a running episode.
         goal_index: (T + 1, N, H) int64, how many goals each human had reached by ``obs[t]``
             (the simulator's count; not in the observation), or None.
+        pose: (T + 1, N, 3) the robot's room pose (x, y, θ) at ``obs[t]`` (what a planning
+            model that knows the room starts from), or None.
     """
 
     obs: np.ndarray
     actions: np.ndarray
     stepped: np.ndarray
     goal_index: np.ndarray | None = None
+    pose: np.ndarray | None = None
 
 
 def record(
@@ -75,15 +78,27 @@ def record(
     obs, _ = sim.reset(seed=seed, scenario_ids=ids)
     all_obs, actions, stepped = [np.asarray(obs, dtype=np.float64)], [], []
     goal_index = [sim.state.human_goal_index.copy()]
+
+    def pose() -> np.ndarray:
+        return np.column_stack([sim.state.robot_xy, sim.state.robot_theta])
+
+    poses = [pose()]
     for _ in range(steps):
         running = ~sim.state.done.copy()
         a = np.asarray(policy(obs), dtype=np.int64)
         obs = sim.step(a).obs
         all_obs.append(np.asarray(obs, dtype=np.float64))
         goal_index.append(sim.state.human_goal_index.copy())
+        poses.append(pose())
         actions.append(a)
         stepped.append(running)
-    return Recording(np.stack(all_obs), np.stack(actions), np.stack(stepped), np.stack(goal_index))
+    return Recording(
+        np.stack(all_obs),
+        np.stack(actions),
+        np.stack(stepped),
+        np.stack(goal_index),
+        np.stack(poses),
+    )
 
 
 def random_policy(seed: int) -> Policy:
@@ -300,9 +315,12 @@ def prediction_errors(
         from pipeline.worldmodel.residual import residual_positions
 
         start = (recording.obs[t0 - 1], recording.obs[t0], recording.actions[t0 - 1])
+        pose = None if recording.pose is None else recording.pose[t0]
         cv = np.linalg.norm(predicted["constant-velocity"] - truth, axis=-1)
         per_seed = [
-            np.linalg.norm(residual_positions(m, *start, future, env_params) - truth, axis=-1)
+            np.linalg.norm(
+                residual_positions(m, *start, future, env_params, pose=pose) - truth, axis=-1
+            )
             for m in planning_models
         ]  # each (N, K, 1 + H)
         result["predictors"][PLANNING_PREDICTOR] = _over_seeds(per_seed, valid)

@@ -22,16 +22,19 @@ def recording():
     return record(ENV, random_policy(3), seed=5, scenario_ids=np.arange(48), steps=24)
 
 
-def rows_of(rec):
-    """The recording as rollout rows (obs, action, episode id, next obs), real steps only."""
-    obs, actions, ids, next_obs = [], [], [], []
+def rows_of(rec, with_poses: bool = False):
+    """The recording as rollout rows (obs, action, episode id, next obs, and with
+    ``with_poses`` the robot's pose after the step), real steps only."""
+    obs, actions, ids, next_obs, poses = [], [], [], [], []
     for n in range(rec.obs.shape[1]):
         steps = np.flatnonzero(rec.stepped[:, n])
         obs.append(rec.obs[steps, n])
         next_obs.append(rec.obs[steps + 1, n])
         actions.append(rec.actions[steps, n])
         ids.append(np.full(len(steps), n))
-    return tuple(np.concatenate(x) for x in (obs, actions, ids, next_obs))
+        poses.append(rec.pose[steps + 1, n])
+    columns = (obs, actions, ids, next_obs, poses) if with_poses else (obs, actions, ids, next_obs)
+    return tuple(np.concatenate(x) for x in columns)
 
 
 def perturbed(seed: int = 0) -> residual.ResidualDynamics:
@@ -70,11 +73,11 @@ def test_a_corrected_human_never_outruns_the_top_speed_and_the_cap_keeps_cv(reco
     np.testing.assert_allclose(residual.residual_positions(capped, *start, future, ENV), cv,
                                atol=1e-5)  # fmt: skip
     with torch.no_grad():
-        capped.net[-1].bias.fill_(1.0)  # pushes every human by ~1.4 m per step
+        capped.net[-1].bias.fill_(100.0)  # pushes every human by ~1.4 m per step
     points, velocity = residual._start(*start, ENV)
     v, w = (torch.zeros(len(points), dtype=torch.float64),) * 2  # the robot stands still
     p0 = torch.from_numpy(points)
-    p1, u1 = capped.double().step(p0, torch.from_numpy(velocity), v, w)
+    p1, _, _ = capped.double().step(p0, torch.from_numpy(velocity), v, w)
     moved = torch.linalg.vector_norm(p1[:, 1:] - p0[:, 1:], dim=-1)
     assert moved.max() <= ENV.human_max_speed * ENV.dt + 1e-9
     assert moved.max() >= ENV.human_max_speed * ENV.dt - 1e-9  # ... and is held there
@@ -176,3 +179,79 @@ def test_save_and_load_round_trip_and_refuse_other_files(tmp_path) -> None:
     torch.save({"format": "other"}, tmp_path / "x.pt")
     with pytest.raises(ValueError, match="not a socnav-wm residual-cv planning model"):
         residual.load_residual(tmp_path / "x.pt")
+
+
+def test_room_features_place_a_person_in_the_room_from_the_robot_pose() -> None:
+    # The robot at (1, 2) facing +y; a person 3 m to its right walks at 0.1 m/step towards +x
+    # of the room. In the room it stands at (4, 2), 0.5 m before the edge of the goal area.
+    pose = torch.tensor([[1.0, 2.0, np.pi / 2]], dtype=torch.float64)
+    points = torch.tensor([[[0.0, 0.0], [0.0, -3.0], [5.0, 5.0], [5.0, 5.0]]], dtype=torch.float64)
+    velocity = torch.tensor(
+        [[[0.0, 0.0], [0.0, -0.1], [0.0, 0.0], [0.0, 0.0]]], dtype=torch.float64
+    )
+    f = residual.room_features(points, velocity, pose, half=4.5)[0, 0]
+    # Centre seen from the person, in its heading's frame: 4 m behind, 2 m to its right.
+    np.testing.assert_allclose(f.numpy(), [-4 / 4.5, -2 / 4.5, 0.5 / 4.5, 1.0, 0.0], atol=1e-12)
+
+
+def test_advance_pose_is_the_simulator_unicycle_for_every_action() -> None:
+    from pipeline.env.core import Simulator
+
+    sim = Simulator(4, ENV)
+    sim.reset(seed=3, scenario_ids=np.arange(4))
+    before = np.column_stack([sim.state.robot_xy, sim.state.robot_theta])
+    v, w = commands_of(np.arange(4), ENV)
+    sim.step(np.arange(4))
+    after = residual.advance_pose(
+        *(torch.from_numpy(np.asarray(x)) for x in (before, v, w)), ENV.dt
+    )
+    np.testing.assert_allclose(after[:, :2].numpy(), sim.state.robot_xy, atol=1e-12)
+    np.testing.assert_allclose(
+        np.cos(after[:, 2].numpy()), np.cos(sim.state.robot_theta), atol=1e-12
+    )
+
+
+def test_sequences_carry_the_pose_each_observation_was_seen_from(recording) -> None:
+    obs, actions, ids, next_obs, pose_after = rows_of(recording, with_poses=True)
+    seqs = residual.make_sequences(obs, actions, ids, next_obs, 5, 3, pose_after)
+    for i in range(0, len(seqs), 7):
+        n, t = next(
+            (n, t)
+            for n in range(recording.obs.shape[1])
+            for t in range(1, recording.obs.shape[0])
+            if np.array_equal(recording.obs[t, n], seqs.obs[i])
+        )
+        np.testing.assert_array_equal(seqs.pose[i], recording.pose[t, n])
+
+
+def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording) -> None:
+    obs, actions, ids, next_obs, pose_after = rows_of(recording, with_poses=True)
+    train, val = ids < 36, ids >= 36
+    seqs = [
+        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], 6, 2, pose_after[m])
+        for m in (train, val)
+    ]
+    result = residual.train_residual(
+        *seqs, ENV, hidden_dim=16, learning_rate=1e-3, batch_size=32, max_epochs=2,
+        patience=2, seed=0, room=True, relative_weight=0.5,
+    )  # fmt: skip
+    assert result.model.room_half == ENV.spawn_half_size
+    assert result.metrics["val_loss"] <= result.metrics["val_loss_constant_velocity"]
+    v = seqs[1]
+    start = (v.previous_obs, v.obs, v.previous_action, v.actions, ENV)
+    with pytest.raises(ValueError, match="knows the room"):
+        residual.residual_positions(result.model, *start)
+    with_pose = residual.residual_positions(result.model, *start, pose=v.pose)
+    assert np.isfinite(with_pose).all()
+    planner_model = residual.ResidualPlanningModel(result.model, ENV)
+    planner_model.reset(v.obs[:2])
+    with pytest.raises(ValueError, match="planning.walls"):
+        planner_model.rollout(4)
+    no_poses = residual.make_sequences(
+        obs[train], actions[train], ids[train], next_obs[train], 6, 2
+    )
+    with pytest.raises(ValueError, match="carry no robot poses"):
+        residual.train_residual(
+            no_poses, seqs[1], ENV, hidden_dim=8, learning_rate=1e-3, batch_size=32,
+            max_epochs=1, patience=1, seed=0, room=True,
+        )  # fmt: skip
