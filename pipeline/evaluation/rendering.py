@@ -635,12 +635,40 @@ def planning_section(
         share = change["changed_share"][i]
         overall = errors["predictors"]["constant-velocity"]["humans"][i]
         from_changes = share * cv["changed"][i] / overall if overall > 0 else math.nan
-        lines.append(
+        line = (
             f"- At k = {errors['k'][i]}, {from_changes:.0%} of constant velocity's error comes "
-            f"from the {share:.0%} of the humans who drew a new goal within those steps: goals "
-            "are not in the observation, so no model of it foresees those turns. The rest, "
-            f"{cv['kept'][i]:.3f} m for the humans who kept their goal, is what a learned model "
-            "could still win."
+            f"from the {share:.0%} of the humans who drew a new goal within those steps "
+            f"({cv['changed'][i]:.3f} m; {cv['kept'][i]:.3f} m for those who kept theirs): "
+            "goals are not in the observation, so no model of it foresees when a person turns "
+            "or where to."
+        )
+        learned = change["predictors"].get("planning-model")
+        if learned:
+            line += (
+                f" The planning model, which also knows where the room ends, has "
+                f"{learned['changed'][i]:.3f} m for those who drew a new goal and "
+                f"{learned['kept'][i]:.3f} m for the others: it trades a little on the people "
+                "who walk on for more on those who turn."
+            )
+        lines.append(line)
+    if "cv-mpc" in summaries:
+        gap = summaries[CEILING]["success"]["mean"] - summaries["cv-mpc"]["success"]["mean"]
+        lines.append(
+            f"- The ceiling succeeds {abs(gap) * 100:.1f} points {'more' if gap >= 0 else 'less'}"
+            " often than `cv-mpc` (means): with this planner on these scenarios, a better model "
+            "of the humans has no more than that to win."
+        )
+    if "cv-mpc" in evaluations and "wm-mpc" in evaluations:
+        parts = []
+        for metric, label in (("success", "success"), ("human_collision", "human collisions")):
+            c = compare(evaluations["wm-mpc"].episodes, evaluations["cv-mpc"].episodes, metric)
+            parts.append(
+                f"{label} {c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, "
+                f"{c.high * 100:+.1f}], p = {fmt_p(c.p_value)}"
+            )
+        lines.append(
+            "- The learned model against constant velocity, the same planner otherwise "
+            "(`wm-mpc` − `cv-mpc`, paired): " + "; ".join(parts) + "."
         )
     lines.append("")
     return lines

@@ -580,4 +580,17 @@ def test_the_planners_are_measured_against_their_ceiling_and_explained():
     assert "`cv-mpc` (constant-velocity) 0.200 m at k = 2" in text
     # 0.1 × 1.5 of the 0.2 m: three quarters of the error is the humans who drew a new goal.
     assert "At k = 2, 75% of constant velocity's error comes from the 10% of the humans" in text
+    assert "The ceiling succeeds 25.0 points more often than `cv-mpc`" in text
+    assert "wm-mpc` − `cv-mpc`" not in text  # no learned model evaluated
+    # With wm-mpc: its paired difference from cv-mpc, and its model's split by goal change.
+    learned = np.ones(n)
+    learned[:2] = 0.0  # loses only the ceiling's 2: 10 scenarios more than cv-mpc wins
+    wm = _episodes("wm-mpc", (BASELINE_SEED,), n, success=learned, human_collision=hits)
+    evaluations["wm-mpc"] = _evaluation(wm)
+    summaries["wm-mpc"] = summarise(wm, ALL_METRICS)
+    split = prediction["policies"]["random"]["goal_change"]["predictors"]
+    split["planning-model"] = {"changed": [0.0, 1.2], "kept": [0.01, 0.06]}
+    text = "\n".join(planning_section(evaluations, summaries, prediction, {"cv-mpc": 2}))
+    assert "(`wm-mpc` − `cv-mpc`, paired): success +25.0 pp [" in text
+    assert "has 1.200 m for those who drew a new goal and 0.060 m for the others" in text
     assert planning_section({"cv-mpc": evaluations["cv-mpc"]}, summaries, prediction, {}) == []
