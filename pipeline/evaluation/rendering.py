@@ -602,6 +602,28 @@ def planning_section(
         rows.append(row)
     header = ["planner", "success; against the ceiling", "human collisions; against the ceiling"]
     lines += _table(header, rows) + [""]
+    robots = [robot for robot in ("orca", "sfm") if robot in evaluations]
+    if robots:
+        lines += [
+            "Against the ORCA and SFM robots, which read the world-frame state (planner − "
+            "robot, paired scenario by scenario; 95% interval, p of the paired test):",
+            "",
+        ]
+        rows = []
+        for method in [CEILING, *planners]:
+            row = [method]
+            for robot in robots:
+                for metric in ("success", "human_collision"):
+                    c = compare(evaluations[method].episodes, evaluations[robot].episodes, metric)
+                    row.append(
+                        f"{c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, "
+                        f"{c.high * 100:+.1f}], p = {fmt_p(c.p_value)}"
+                    )
+            rows.append(row)
+        header = ["planner"] + [
+            f"{label} − {robot}" for robot in robots for label in ("success", "human collisions")
+        ]
+        lines += _table(header, rows) + [""]
     collided = summaries[CEILING]["human_collision"]["mean"]
     lines.append(
         f"- `{CEILING}` itself collides with a human in {collided:.1%} of the episodes: "

@@ -592,5 +592,11 @@ def test_the_planners_are_measured_against_their_ceiling_and_explained():
     split["planning-model"] = {"changed": [0.0, 1.2], "kept": [0.01, 0.06]}
     text = "\n".join(planning_section(evaluations, summaries, prediction, {"cv-mpc": 2}))
     assert "(`wm-mpc` − `cv-mpc`, paired): success +25.0 pp [" in text
+    assert "Against the ORCA and SFM robots" not in text  # neither evaluated
+    orca = _episodes("orca", (BASELINE_SEED,), n, success=cv_success, human_collision=hits)
+    evaluations["orca"] = _evaluation(orca)
+    text = "\n".join(planning_section(evaluations, summaries, prediction, {"cv-mpc": 2}))
+    assert "| planner | success − orca | human collisions − orca |" in text
+    assert "| wm-mpc | +25.0 pp [" in text and "| cv-mpc | +0.0 pp [" in text
     assert "has 1.200 m for those who drew a new goal and 0.060 m for the others" in text
     assert planning_section({"cv-mpc": evaluations["cv-mpc"]}, summaries, prediction, {}) == []
