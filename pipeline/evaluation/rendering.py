@@ -565,6 +565,15 @@ MODEL_PLANNERS = {
 predict`` that is their model."""
 
 
+def _paired(a: MethodEvaluation, b: MethodEvaluation, metric: str) -> str:
+    """``a`` − ``b`` on a rate ``metric``, paired scenario by scenario: "+x pp [low, high], p"."""
+    c = compare(a.episodes, b.episodes, metric)
+    return (
+        f"{c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, {c.high * 100:+.1f}], "
+        f"p = {fmt_p(c.p_value)}"
+    )
+
+
 def planning_section(
     evaluations: Mapping[str, MethodEvaluation],
     summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
@@ -593,11 +602,7 @@ def planning_section(
         for metric in ("success", "human_collision"):
             cell = fmt_ci(metric, summaries[method][metric])
             if method != CEILING:
-                c = compare(evaluations[method].episodes, evaluations[CEILING].episodes, metric)
-                cell += (
-                    f"; {c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, {c.high * 100:+.1f}], "
-                    f"p = {fmt_p(c.p_value)}"
-                )
+                cell += "; " + _paired(evaluations[method], evaluations[CEILING], metric)
             row.append(cell)
         rows.append(row)
     header = ["planner", "success; against the ceiling", "human collisions; against the ceiling"]
@@ -611,15 +616,14 @@ def planning_section(
         ]
         rows = []
         for method in [CEILING, *planners]:
-            row = [method]
-            for robot in robots:
-                for metric in ("success", "human_collision"):
-                    c = compare(evaluations[method].episodes, evaluations[robot].episodes, metric)
-                    row.append(
-                        f"{c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, "
-                        f"{c.high * 100:+.1f}], p = {fmt_p(c.p_value)}"
-                    )
-            rows.append(row)
+            rows.append(
+                [method]
+                + [
+                    _paired(evaluations[method], evaluations[robot], metric)
+                    for robot in robots
+                    for metric in ("success", "human_collision")
+                ]
+            )
         header = ["planner"] + [
             f"{label} − {robot}" for robot in robots for label in ("success", "human collisions")
         ]
@@ -681,13 +685,10 @@ def planning_section(
             "of the humans has no more than that to win."
         )
     if "cv-mpc" in evaluations and "wm-mpc" in evaluations:
-        parts = []
-        for metric, label in (("success", "success"), ("human_collision", "human collisions")):
-            c = compare(evaluations["wm-mpc"].episodes, evaluations["cv-mpc"].episodes, metric)
-            parts.append(
-                f"{label} {c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, "
-                f"{c.high * 100:+.1f}], p = {fmt_p(c.p_value)}"
-            )
+        parts = [
+            f"{label} " + _paired(evaluations["wm-mpc"], evaluations["cv-mpc"], metric)
+            for metric, label in (("success", "success"), ("human_collision", "human collisions"))
+        ]
         lines.append(
             "- The learned model against constant velocity, the same planner otherwise "
             "(`wm-mpc` − `cv-mpc`, paired): " + "; ".join(parts) + "."
