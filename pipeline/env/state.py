@@ -69,6 +69,10 @@ class BatchState:
     def num_envs(self) -> int:
         return self.robot_theta.shape[0]
 
+    def robot_pose(self) -> np.ndarray:
+        """(N, 3) the robot's room pose: x, y (m) and θ (rad); a copy."""
+        return np.column_stack([self.robot_xy, self.robot_theta])
+
     @property
     def num_humans(self) -> int:
         return self.human_speed.shape[1]

@@ -34,7 +34,7 @@ from pipeline.env.core import NUM_ACTIONS
 from pipeline.env.params import EnvParams
 from pipeline.planning.models import PlanningModel
 from pipeline.planning.params import PlanningParams
-from pipeline.worldmodel.ego import commands_of
+from pipeline.worldmodel.ego import advance_pose, commands_of
 
 STOP, FORWARD, LEFT, RIGHT = range(NUM_ACTIONS)
 
@@ -140,10 +140,7 @@ class Planner:
             centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
             collided = centre < contact
             if robot is not None:
-                v, w = commands_of(actions, e)
-                robot[:, 2] += w * e.dt
-                robot[:, 0] += v * e.dt * np.cos(robot[:, 2])
-                robot[:, 1] += v * e.dt * np.sin(robot[:, 2])
+                robot = advance_pose(robot, *commands_of(actions, e), e.dt)
                 collided |= np.abs(robot[:, :2]).max(axis=1) >= wall_limit
             reached = ~collided & (new_goal_distance < e.success_distance)
             score += np.where(
@@ -191,7 +188,6 @@ class Planner:
             return act
 
         def localised(sim: Any) -> np.ndarray:
-            state = sim.state
-            return act(sim.observation, np.column_stack([state.robot_xy, state.robot_theta]))
+            return act(sim.observation, sim.state.robot_pose())
 
         return localised

@@ -56,6 +56,17 @@ def ego_step(points: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float) ->
     return np.stack([c * x + s * y - np.asarray(v)[..., None] * dt, -s * x + c * y], axis=-1)
 
 
+def advance_pose(pose: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
+    """The robot's room pose (N, 3: x, y, θ) after it executes ``(v, ω)`` (N,): a turn by
+    ``ω·dt``, then a step of ``v·dt`` along the new heading (the simulator's unicycle update,
+    without its wrap of θ, which changes no position)."""
+    theta = pose[:, 2] + omega * dt
+    step = v * dt
+    return np.column_stack(
+        [pose[:, 0] + step * np.cos(theta), pose[:, 1] + step * np.sin(theta), theta]
+    )
+
+
 def rotate_vectors(vectors: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
     """Robot-frame vectors (..., P, 2) (velocities) after the robot turned by ``ω·dt``."""
     angle = np.asarray(omega, dtype=np.float64)[..., None] * dt

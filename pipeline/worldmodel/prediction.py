@@ -79,17 +79,14 @@ def record(
     all_obs, actions, stepped = [np.asarray(obs, dtype=np.float64)], [], []
     goal_index = [sim.state.human_goal_index.copy()]
 
-    def pose() -> np.ndarray:
-        return np.column_stack([sim.state.robot_xy, sim.state.robot_theta])
-
-    poses = [pose()]
+    poses = [sim.state.robot_pose()]
     for _ in range(steps):
         running = ~sim.state.done.copy()
         a = np.asarray(policy(obs), dtype=np.int64)
         obs = sim.step(a).obs
         all_obs.append(np.asarray(obs, dtype=np.float64))
         goal_index.append(sim.state.human_goal_index.copy())
-        poses.append(pose())
+        poses.append(sim.state.robot_pose())
         actions.append(a)
         stepped.append(running)
     return Recording(

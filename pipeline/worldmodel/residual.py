@@ -84,7 +84,8 @@ def advance_pose(
     pose: torch.Tensor, v: torch.Tensor, omega: torch.Tensor, dt: float
 ) -> torch.Tensor:
     """The robot's room pose (B, 3: x, y, θ) after it executes ``(v, ω)`` (B,): a turn by
-    ``ω·dt``, then a step of ``v·dt`` along the new heading (the simulator's unicycle update)."""
+    ``ω·dt``, then a step of ``v·dt`` along the new heading: the torch twin of
+    :func:`pipeline.worldmodel.ego.advance_pose`, for the model's differentiable rollouts."""
     theta = pose[:, 2] + omega * dt
     step = v * dt
     x = pose[:, 0] + step * torch.cos(theta)
@@ -407,7 +408,10 @@ def train_residual(
             table[actions, 1].float(),
             torch.as_tensor(seqs.targets, dtype=torch.float32),
             torch.as_tensor(seqs.mask, dtype=torch.float32),
-            torch.as_tensor(seqs.pose if room else np.zeros((len(seqs), 3)), dtype=torch.float32),
+            # A model that does not know the room ignores the pose (zeros when none was recorded).
+            torch.as_tensor(
+                np.zeros((len(seqs), 3)) if seqs.pose is None else seqs.pose, dtype=torch.float32
+            ),
         )
 
     train_t, val_t = tensors(train), tensors(val)
@@ -418,7 +422,7 @@ def train_residual(
         with torch.no_grad():
             for i in range(0, len(val), 4096):
                 p, u, v, w, y, m, pose = (x[i : i + 4096] for x in val_t)
-                predicted = model.rollout(p, u, v, w, pose if room else None)
+                predicted = model.rollout(p, u, v, w, pose)
                 total += float(_masked_loss(predicted, y, m)) * float(m.sum())
                 weight += float(m.sum())
         return total / max(weight, 1.0)
@@ -427,7 +431,7 @@ def train_residual(
     if relative_weight:
         with torch.no_grad():
             p, u, v, w, y, m, pose = (x[:20_000] for x in train_t)
-            error = _step_errors(model.rollout(p, u, v, w, pose if room else None), y)
+            error = _step_errors(model.rollout(p, u, v, w, pose), y)
             per_step = (error * m).sum(0) / m.sum(0).clamp(min=1)
         weights = per_step.clamp(min=1e-6) ** -relative_weight
         weights = weights / weights.mean()
@@ -446,7 +450,7 @@ def train_residual(
         for i in range(0, len(train), batch_size):
             rows = order[i : i + batch_size]
             p, u, v, w, y, m, pose = (x[rows] for x in train_t)
-            predicted = model.rollout(p, u, v, w, pose if room else None)
+            predicted = model.rollout(p, u, v, w, pose)
             loss = _masked_loss(predicted, y, m, weights)
             optimizer.zero_grad()
             loss.backward()

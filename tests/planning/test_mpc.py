@@ -97,7 +97,7 @@ def test_the_walls_policy_reads_only_the_observation_and_the_pose() -> None:
     half = ENV.wall_half_size - ENV.robot_radius
     # Facing the wall 0.1 m from touching it, the goal straight ahead beyond it: progress says
     # forward, the wall says no.
-    state = SimpleNamespace(robot_xy=np.array([[half - 0.1, 0.0]]), robot_theta=np.array([0.0]))
+    state = SimpleNamespace(robot_pose=lambda: np.array([[half - 0.1, 0.0, 0.0]]))
     sim = SimpleNamespace(observation=observation((1.0, 0.0), far), state=state)
     blind = Planner(ConstantVelocityModel(ENV), PlanningParams(walls=False), ENV)
     seeing = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV)

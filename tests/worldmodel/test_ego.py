@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from pipeline.env import EnvParams, Simulator
-from pipeline.worldmodel.ego import commands_of, ego_step, positions, predict_positions
+from pipeline.worldmodel.ego import (
+    advance_pose,
+    commands_of,
+    ego_step,
+    positions,
+    predict_positions,
+)
 
 # Humans slower than the speed threshold are stopped: a scene of static humans.
 STATIC = EnvParams(human_max_speed=0.01)
@@ -26,6 +32,23 @@ def test_the_ego_motion_predicts_static_scenes_to_a_micrometre(action: int) -> N
         error = np.abs(predicted - positions(result.obs))[active]
         assert active.any() and error.max() <= 1e-6
         obs = result.obs
+
+
+def test_advance_pose_moves_the_robot_as_the_simulator_does() -> None:
+    sim = Simulator(64, STATIC)
+    sim.reset(seed=5)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        pose = sim.state.robot_pose()
+        actions = rng.integers(0, 4, size=64)
+        result = sim.step(actions)
+        active = result.info["active"] & ~result.terminated
+        predicted = advance_pose(pose, *commands_of(actions, STATIC), STATIC.dt)
+        after = sim.state.robot_pose()
+        turn = np.angle(np.exp(1j * (predicted[:, 2] - after[:, 2])))  # the simulator wraps θ
+        assert active.any()
+        assert np.abs(predicted[:, :2] - after[:, :2])[active].max() <= 1e-12
+        assert np.abs(turn[active]).max() <= 1e-12
 
 
 def test_the_ego_motion_is_exact_for_continuous_commands_too() -> None:
