@@ -249,10 +249,11 @@ class PlanningModelParams(Section):
     """Epochs without a better validation loss before stopping (the best epoch is kept)."""
     val_fraction: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
     """Share of the rollout episodes held out for validation."""
-    relative_weight: float = Field(1.0, ge=0, le=2, allow_inf_nan=False)
+    relative_weight: float = Field(0.5, ge=0, le=2, allow_inf_nan=False)
     """Step ``k``'s error counts ``1 / e_k^relative_weight`` in the loss, ``e_k`` being constant
     velocity's mean error at ``k`` (0: the plain mean, which the last steps' errors, 100× the
-    first ones', decide alone; 1: every step relative to constant velocity)."""
+    first ones', decide alone; 1: every step relative to constant velocity; 0.5, between them,
+    is better than constant velocity far ahead and as good near it: docs/worldmodel.md)."""
     room: bool = True
     """The model knows the room: each person's features include where it is in the room and
     how far ahead the area where goals are drawn ends (the robot's pose, known to a robot with
