@@ -64,7 +64,8 @@ repro:
 	dvc repro report
 
 # The studies of params.yaml's `studies:` (studies/dvc.yaml: socnav-wm sweep on local Ray, one
-# task per core), after the world model they train on.
+# task per core), after the world model they train on, then `study_claims`: the paper's claims
+# with the studies' evidence (reports/studies/claims.md).
 study: $(STAMP)
 	PATH="$(CURDIR)/$(BIN):$$PATH" dvc repro studies/dvc.yaml
 

@@ -813,6 +813,35 @@ def sweep(
         )
 
 
+@app.command("study-claims")
+@friendly_errors
+def study_claims(
+    report_claims: Annotated[
+        Path, typer.Option(help="The report's claims (stage `report`).")
+    ] = Path("reports/claims.json"),
+    studies_dir: Annotated[
+        Path, typer.Option(help="The studies' reports (each study's claims.json).")
+    ] = Path("reports/studies"),
+    document: Annotated[
+        list[Path] | None,
+        typer.Option(help="Markdown file whose claims block gets the table (repeatable)."),
+    ] = None,
+    no_tracking: NoTrackingOption = False,
+) -> None:
+    """The paper's claims, each decided by the strongest evidence present: the seeds study's
+    five seeds for the training claims, the horizon study for the look-ahead claim, the report
+    for the rest (stage `study_claims` of studies/dvc.yaml)."""
+    from pipeline.stages import study_claims as stage
+
+    message = stage.run(
+        report_claims=report_claims,
+        studies_dir=studies_dir,
+        documents=tuple(document) if document is not None else (Path("docs/studies.md"),),
+        tracking=not no_tracking,
+    )
+    typer.echo(message)
+
+
 # --------------------------------------------------------------------------- bench
 def _print_machine(torch_build: bool = False) -> None:
     """The machine a benchmark ran on, printed under its table (as MLflow records it), with the

@@ -603,11 +603,12 @@ def test_stage_sections_follow_dvc_yaml() -> None:
         **yaml.safe_load((ROOT / "studies" / "dvc.yaml").read_text())["stages"],
     }
     sections = STAGE_SECTIONS
-    assert set(sections) == set(stages)
+    assert set(sections) <= set(stages)
     for name, stage in stages.items():
         listed = stage.get("do", stage).get("params", [])
         expected = tuple("baselines" if entry == "baselines.${item}" else entry for entry in listed)
-        assert sections[name] == expected, name
+        # A stage that reads no params (study_claims merges files) has no entry.
+        assert sections.get(name, ()) == expected, name
 
 
 @pytest.mark.parametrize(

@@ -29,9 +29,17 @@ def test_the_studies_are_a_pipeline_of_their_own() -> None:
     root = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
     studies = yaml.safe_load((ROOT / "studies" / "dvc.yaml").read_text())["stages"]
     assert not [name for name in root if name.startswith("study_")]
-    assert set(studies) == {"study_horizon", "study_seeds", "study_sort_humans"}
+    assert set(studies) == {"study_horizon", "study_seeds", "study_sort_humans", "study_claims"}
     for name, stage in studies.items():
         assert stage["wdir"] == "..", name
+        if name == "study_claims":  # downstream of the report and of the studies that check claims
+            assert stage["cmd"] == "socnav-wm study-claims"
+            assert stage["deps"][:3] == [
+                "reports/claims.json",
+                "reports/studies/seeds",
+                "reports/studies/horizon",
+            ]
+            continue
         assert stage["cmd"] == f"socnav-wm sweep --study {name.removeprefix('study_')}"
         assert stage["deps"][:2] == ["models/vae.pt", "models/lstm.pt"]
     # A file that is no pipeline file is refused rather than checked against either list.

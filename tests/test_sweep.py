@@ -156,6 +156,89 @@ def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> No
     assert training_claims(SweepResult(grid)) is None
 
 
+def test_study_claims_take_each_claim_from_the_study_that_checks_it(sweepdir: Path) -> None:
+    import pyarrow as pa
+
+    from pipeline.evaluation.paper import CLAIMS
+    from pipeline.stages import study_claims
+
+    # The report: every claim inconclusive, one check each (its claims.json's shape).
+    report = {
+        claim.claim_id: {
+            "statement": claim.statement,
+            "source": claim.source,
+            "kind": claim.kind,
+            "verdict": "inconclusive",
+            "note": "",
+            "checks": [{"status": "inconclusive", "evidence": f"report on {claim.claim_id}"}],
+        }
+        for claim in CLAIMS
+    }
+    (sweepdir / "reports").mkdir()
+    (sweepdir / "reports" / "claims.json").write_text(json.dumps(report))
+    (sweepdir / "docs").mkdir()
+    document = sweepdir / "docs" / "studies.md"
+    document.write_text("# Studies\n\n<!-- socnav-wm:claims -->\n<!-- /socnav-wm:claims -->\nend\n")
+
+    def merged() -> dict[str, dict]:
+        result = _invoke("study-claims", "--no-tracking")
+        assert result.exit_code == 0, result.output
+        found = json.loads((sweepdir / "reports" / "studies" / "claims.json").read_text())
+        return {claim["id"]: claim for claim in found}
+
+    # No study has run: the report decides, and the look-ahead claim is not checked.
+    before = merged()
+    assert set(before) == {*report, study_claims.HORIZON_ID}
+    assert {c["evidence"] for i, c in before.items() if i in report} == {"the pipeline's report"}
+    assert before[study_claims.HORIZON_ID]["verdict"] == "not checked"
+    # The seeds study (5 seeds; 2stepahead learns first, the world models end higher) decides
+    # the training claims; the horizon study the look-ahead claim.
+    variants = ["dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm", "2stepahead-maspm"]
+    plan = plan_sweep("seeds", StudyParams(variants=variants, seeds=[0, 1, 2, 3, 4]))
+    outcome = SweepResult(plan)
+    for run in plan.runs:
+        first = 50 if run.variant == "2stepahead" else 150
+        final = {"dueling-dqn": 0.2, "2stepahead-maspm": 0.9}.get(run.variant, 0.5)
+        success = [episode >= first + run.seed for episode in range(300)]
+        returns = [final + 0.01 * run.seed if episode >= 100 else 0.0 for episode in range(300)]
+        path = plan.run_dir(run) / "training" / run.variant / f"seed-{run.seed}.parquet"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.table({"return": returns, "success": success}), path)
+        outcome.results[run] = {"status": "done", "metrics": {"success": 0.9}}
+    write_results(outcome)
+    horizon = plan_sweep(
+        "horizon",
+        StudyParams(variants=["2stepahead"], seeds=[0, 1, 2], grid={"agent.horizon": [2, 8]}),
+    )
+    outcome = SweepResult(horizon)
+    for run in horizon.runs:
+        longer = run.values[0][1] == 8
+        metrics = {"success": 0.8, "train_cpu_s": 300.0 + (100.0 + run.seed if longer else 0)}
+        outcome.results[run] = {"status": "done", "metrics": metrics}
+    write_results(outcome)
+    after = merged()
+    for claim_id, claim in after.items():
+        if claim_id.startswith("training-"):
+            assert claim["verdict"] == "reproduced", claim_id
+            assert claim["evidence"] == "the `seeds` study, 5 seeds a variant"
+        elif claim_id in report:
+            assert claim == before[claim_id]
+    assert after[study_claims.HORIZON_ID]["verdict"] == "reproduced"
+    assert after[study_claims.HORIZON_ID]["evidence"] == "the `horizon` study, 3 seeds a variant"
+    text = document.read_text()
+    assert text.startswith("# Studies") and text.endswith("end\n")
+    assert "| **reproduced** | the `horizon` study, 3 seeds a variant |" in text
+    assert "INCONCLUSIVE" in (sweepdir / "reports" / "studies" / "claims.md").read_text()
+
+
+def test_study_claims_without_the_report_fail_in_one_line(sweepdir: Path) -> None:
+    result = runner.invoke(app, ["study-claims", "--no-tracking"])
+    assert result.exit_code != 0
+    assert result.output.strip().splitlines() == [
+        "error: reports/claims.json: no report claims (run `dvc repro report`)"
+    ]
+
+
 def test_a_study_is_validated_like_every_section(tmp_path: Path) -> None:
     path = tmp_path / "params.yaml"
     for text, message in (

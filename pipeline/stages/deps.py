@@ -37,6 +37,8 @@ STAGE_MODULES: dict[str, str] = {
     "study_horizon": "pipeline.sweep",
     "study_seeds": "pipeline.sweep",
     "study_sort_humans": "pipeline.sweep",
+    # studies/dvc.yaml: the claims with the studies' evidence, after them and the report.
+    "study_claims": "pipeline.stages.study_claims",
 }
 """Stage name → the module its command runs."""
 
