@@ -331,9 +331,10 @@ def render_summary(
         "significant in the paper's direction, not reproduced when one is significant the "
         "other way; _inconclusive_ means no significant difference either way. Training "
         "claims compare per-seed values (Mann–Whitney): with fewer than 4–5 seeds a side "
-        "they cannot be decided; the seeds study (`dvc repro studies/dvc.yaml:study_seeds`) "
-        "checks them with five, in `reports/studies/seeds/summary.md`. Verdicts are computed "
-        "from this run's data.",
+        "they cannot be decided. Verdicts are computed from this run's data. The studies "
+        "(`make study`, hours of trainings outside `dvc repro`) check the training claims "
+        "with five seeds and the paper's look-ahead claim; `reports/studies/claims.md` gives "
+        "every claim with the strongest evidence present (stage `study_claims`).",
         "",
     ]
     for result in claims:
