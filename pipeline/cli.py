@@ -442,17 +442,21 @@ def report(
 ) -> None:
     """Table, paired tests, Pareto set, figures and the paper's claims checked; the results
     table also goes into the results blocks of README.md and docs/evaluation.md (stage
-    `report`)."""
+    `report`), or of the --document files. A report of other evaluations (--eval-dir or
+    --out-dir not the pipeline's) writes no block unless --document names one."""
     params = _load(params_path, overlays, overrides)
     from pipeline.stages import report as stage
 
+    documents = tuple(document) if document is not None else None
+    if documents is None and (eval_dir != Path("data/eval") or out_dir != Path("reports")):
+        documents = ()  # the README's table is the pipeline's, not another set's
     message = stage.run(
         params,
         eval_dir=eval_dir,
         training_dir=training_dir,
         out_dir=out_dir,
         metrics=metrics,
-        documents=tuple(document) if document is not None else None,
+        documents=documents,
         tracking=not no_tracking,
     )
     typer.echo(message)

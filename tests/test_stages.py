@@ -202,7 +202,15 @@ def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
         success = metrics["metrics"]["success"]
         assert success["mean"] == pytest.approx(float(np.mean(episodes["success"].to_numpy())))
 
+    # A report of other evaluations leaves the README's results block alone.
+    readme = workdir / "README.md"
+    readme.write_text("<!-- socnav-wm:results -->\n<!-- /socnav-wm:results -->\n")
+    other = ("--out-dir", "other", "--metrics", "other/report.json", "--no-tracking")
+    _invoke("report", *other)
+    assert (workdir / "other" / "summary.md").is_file()
+    assert readme.read_text() == "<!-- socnav-wm:results -->\n<!-- /socnav-wm:results -->\n"
     out = _invoke("report").output
+    assert "`dueling-dqn` |" in readme.read_text()
     assert "missing: wm-dueling-dqn, 2stepahead, maspm" in out
     for path in ("summary.md", "pareto.json", "claims.json", "figures/histograms.png",
                  "figures/training_curves.png", "figures/scenarios.gif"):  # fmt: skip
