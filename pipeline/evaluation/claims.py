@@ -60,6 +60,8 @@ class ClaimCheck:
     p_value: float = math.nan
     p_holm: float = math.nan
     favours_subject: bool | None = None
+    seeds_needed: int | None = None
+    """For an undecided check over seeds: about how many seeds a side would decide it."""
 
 
 @dataclass
@@ -106,6 +108,41 @@ def _mann_whitney(a: Sequence[float], b: Sequence[float]) -> float:
     return float(scipy_stats.mannwhitneyu(a, b, alternative="two-sided").pvalue)
 
 
+MANN_WHITNEY_EFFICIENCY = 3 / math.pi
+"""Mann–Whitney's asymptotic efficiency relative to the t-test on normal data (about 0.955)."""
+
+MAX_SEEDS_NEEDED = 100
+"""Above this many seeds a side, :func:`seeds_needed` just says "more"."""
+
+
+def seeds_needed(
+    a: Sequence[float], b: Sequence[float], alpha: float, power: float = 0.8
+) -> int | None:
+    """About how many seeds a side a two-sided Mann–Whitney test at ``alpha`` needs to detect
+    the difference of means of ``a`` and ``b`` with probability ``power``, if the seeds spread
+    as they do here (normal approximation: ``2 (z₁₋α/₂ + z_power)² σ² / Δ²``, σ the pooled
+    standard deviation, divided by Mann–Whitney's efficiency), and at least the seeds at which
+    the exact test can reach ``alpha`` at all. ``MAX_SEEDS_NEEDED + 1`` for
+    a difference too small for that many, None with fewer than 2 seeds a side. An estimate
+    from few seeds: a guide to the next study's size, not a test."""
+    if len(a) < 2 or len(b) < 2:
+        return None
+    difference = abs(float(np.mean(a)) - float(np.mean(b)))
+    pooled = (
+        (np.var(a, ddof=1) * (len(a) - 1) + np.var(b, ddof=1) * (len(b) - 1))
+        / (len(a) + len(b) - 2)
+    ) ** 0.5
+    if difference == 0:
+        return MAX_SEEDS_NEEDED + 1
+    z = scipy_stats.norm.ppf(1 - alpha / 2) + scipy_stats.norm.ppf(power)
+    n = 2 * (z * float(pooled) / difference) ** 2 / MANN_WHITNEY_EFFICIENCY
+    # However far apart, n seeds a side cannot beat the exact test's smallest p, 2 / C(2n, n).
+    fewest = 2
+    while 2 / math.comb(2 * fewest, fewest) > alpha:
+        fewest += 1
+    return int(min(max(math.ceil(n), fewest), MAX_SEEDS_NEEDED + 1))
+
+
 def check_claims(
     evaluations: Mapping[str, MethodEvaluation],
     means: Mapping[str, Mapping[str, float]],
@@ -130,6 +167,7 @@ def check_claims(
     means = {m: v for m, v in means.items() if m in PAPER_METHODS}
     results: list[ClaimResult] = []
     tested: list[ClaimCheck] = []  # the current claim's checks with a p-value: its Holm family
+    per_seed: dict[int, tuple[list[float], list[float]]] = {}  # id(check) → a seeds check's values
 
     def paired_check(subject: str, other: str, metric: str) -> ClaimCheck:
         check = ClaimCheck(subject, other, metric)
@@ -178,6 +216,7 @@ def check_claims(
         if mean_a != mean_b:
             check.favours_subject = (mean_a < mean_b) if lower_is_better else (mean_a > mean_b)
         check.p_value = _mann_whitney(a, b)
+        per_seed[id(check)] = (a, b)
         check.evidence = (
             f"{subject} {mean_a:.3g} [{min(a):.3g}, {max(a):.3g}] vs {other} {mean_b:.3g} "
             f"[{min(b):.3g}, {max(b):.3g}] over {len(a)} and {len(b)} seeds (Mann–Whitney"
@@ -250,6 +289,14 @@ def check_claims(
             else:
                 check.status = "inconclusive"
             check.evidence += f", p = {fmt_p(check.p_value)}, Holm p = {fmt_p(check.p_holm)})"
+            needed = None
+            if check.status == "inconclusive" and id(check) in per_seed:
+                # At Holm's strictest threshold, α / m (Bonferroni's): a conservative size.
+                needed = seeds_needed(*per_seed[id(check)], alpha / len(tested))
+            if needed is not None:
+                check.seeds_needed = needed
+                more = f"about {needed}" if needed <= MAX_SEEDS_NEEDED else "more than 100"
+                check.evidence += f"; {more} seeds a side would decide it (80% power)"
         results.append(result)
 
     for result in results:

@@ -525,6 +525,42 @@ def test_training_claims_need_enough_seeds_and_follow_the_data():
     assert _verdicts({}, {}, _training({"dueling-dqn": low}))[claim] == "not testable"
 
 
+def test_an_undecided_training_check_says_how_many_seeds_would_decide_it():
+    from scipy import stats
+
+    from pipeline.evaluation.claims import MAX_SEEDS_NEEDED, check_claims, seeds_needed
+
+    rng = np.random.default_rng(0)
+    others = ("dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm")
+    # Three seeds a side, 2 standard deviations apart: inconclusive, and the estimate is small.
+    high, low = [0.62, 0.70, 0.78], [0.54, 0.62, 0.70]
+    training = _training({"2stepahead-maspm": high} | dict.fromkeys(others, low))
+    (result,) = [
+        r for r in check_claims({}, {}, training) if r.claim.claim_id.endswith("maspm-highest")
+    ]
+    assert result.verdict == "inconclusive"
+    needed = {c.seeds_needed for c in result.checks}
+    assert needed == {seeds_needed(high, low, 0.05 / 4)}
+    assert "seeds a side would decide it (80% power)" in result.checks[0].evidence
+    # The estimate is what it says: at that many seeds a side, with the same means and spread,
+    # the Mann–Whitney test at α / 4 decides about 80% of simulated studies (normal seeds).
+    (n,) = needed
+    spread = float(np.sqrt((np.var(high, ddof=1) + np.var(low, ddof=1)) / 2))  # pooled: 0.08
+    decided = np.mean([
+        stats.mannwhitneyu(rng.normal(0.70, spread, n), rng.normal(0.62, spread, n)).pvalue
+        <= 0.05 / 4
+        for _ in range(400)
+    ])  # fmt: skip
+    assert 0.7 <= decided <= 0.92
+    # Seeds far apart need no more than the exact test can decide: 5 a side at 0.0125
+    # (smallest p 2 / 252), 4 at 0.05 (2 / 70); 3 a side can never go below p = 0.1.
+    assert seeds_needed([0.9, 0.91, 0.92], [0.1, 0.11, 0.12], 0.05 / 4) == 5
+    assert seeds_needed([0.9, 0.91, 0.92], [0.1, 0.11, 0.12], 0.05) == 4
+    # No difference: more than the cap; fewer than 2 seeds: no estimate.
+    assert seeds_needed([0.5, 0.6], [0.6, 0.5], 0.05) == MAX_SEEDS_NEEDED + 1
+    assert seeds_needed([0.5], [0.6, 0.5], 0.05) is None
+
+
 def test_training_summary_and_logs(tmp_path):
     folder = tmp_path / "training"
     (folder / "maspm").mkdir(parents=True)
