@@ -295,7 +295,11 @@ def check_claims(
                 needed = seeds_needed(*per_seed[id(check)], alpha / len(tested))
             if needed is not None:
                 check.seeds_needed = needed
-                more = f"about {needed}" if needed <= MAX_SEEDS_NEEDED else "more than 100"
+                more = (
+                    f"about {needed}"
+                    if needed <= MAX_SEEDS_NEEDED
+                    else f"more than {MAX_SEEDS_NEEDED}"
+                )
                 check.evidence += f"; {more} seeds a side would decide it (80% power)"
         results.append(result)
 
