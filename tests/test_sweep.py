@@ -117,27 +117,33 @@ def test_the_horizon_claim_is_checked_on_paired_seeds(sweepdir: Path) -> None:
     assert horizon_verdict(SweepResult(other)) is None
 
 
-def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> None:
+VARIANTS = ["dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm", "2stepahead-maspm"]
+
+
+def _seeds_study(seeds: list[int]) -> SweepResult:
+    """A finished `seeds` study of every variant, its results written: 2stepahead succeeds from
+    its 50th episode on, the others from their 150th; the world-model variants end at a higher
+    return than dueling-dqn, 2stepahead-maspm at the highest."""
     import pyarrow as pa
 
-    variants = ["dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm", "2stepahead-maspm"]
+    plan = plan_sweep("seeds", StudyParams(variants=VARIANTS, seeds=seeds))
+    outcome = SweepResult(plan)
+    for run in plan.runs:
+        first = 50 if run.variant == "2stepahead" else 150
+        final = {"dueling-dqn": 0.2, "2stepahead-maspm": 0.9}.get(run.variant, 0.5)
+        success = [episode >= first + run.seed for episode in range(300)]
+        returns = [final + 0.01 * run.seed if episode >= 100 else 0.0 for episode in range(300)]
+        path = plan.run_dir(run) / "training" / run.variant / f"seed-{run.seed}.parquet"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.table({"return": returns, "success": success}), path)
+        outcome.results[run] = {"status": "done", "metrics": {"success": 0.9}}
+    write_results(outcome)
+    return outcome
 
+
+def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> None:
     def claims(seeds: list[int]) -> dict[str, str]:
-        plan = plan_sweep("seeds", StudyParams(variants=variants, seeds=seeds))
-        outcome = SweepResult(plan)
-        for run in plan.runs:
-            # 2stepahead succeeds from its 50th episode on, the others from their 150th; the
-            # world-model variants end at a higher return than dueling-dqn, 2stepahead-maspm
-            # at the highest.
-            first = 50 if run.variant == "2stepahead" else 150
-            final = {"dueling-dqn": 0.2, "2stepahead-maspm": 0.9}.get(run.variant, 0.5)
-            success = [episode >= first + run.seed for episode in range(300)]
-            returns = [final + 0.01 * run.seed if episode >= 100 else 0.0 for episode in range(300)]
-            path = plan.run_dir(run) / "training" / run.variant / f"seed-{run.seed}.parquet"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            pq.write_table(pa.table({"return": returns, "success": success}), path)
-            outcome.results[run] = {"status": "done", "metrics": {"success": 0.9}}
-        write_results(outcome)
+        plan = _seeds_study(seeds).plan
         found = json.loads((plan.out_dir / "claims.json").read_text())
         assert "## The paper's training claims" in (plan.out_dir / "summary.md").read_text()
         return {claim["id"]: claim["verdict"] for claim in found}
@@ -151,14 +157,12 @@ def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> No
     assert set(claims([0, 1, 2]).values()) == {"inconclusive"}
     # A study with a grid mixes its grid values' seeds: no training claims.
     grid = plan_sweep(
-        "g", StudyParams(variants=variants[:2], seeds=[0], grid={"agent.gamma": [0.9]})
+        "g", StudyParams(variants=VARIANTS[:2], seeds=[0], grid={"agent.gamma": [0.9]})
     )
     assert training_claims(SweepResult(grid)) is None
 
 
 def test_study_claims_take_each_claim_from_the_study_that_checks_it(sweepdir: Path) -> None:
-    import pyarrow as pa
-
     from pipeline.evaluation.paper import CLAIMS
     from pipeline.stages import study_claims
 
@@ -193,19 +197,7 @@ def test_study_claims_take_each_claim_from_the_study_that_checks_it(sweepdir: Pa
     assert before[study_claims.HORIZON_ID]["verdict"] == "not checked"
     # The seeds study (5 seeds; 2stepahead learns first, the world models end higher) decides
     # the training claims; the horizon study the look-ahead claim.
-    variants = ["dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm", "2stepahead-maspm"]
-    plan = plan_sweep("seeds", StudyParams(variants=variants, seeds=[0, 1, 2, 3, 4]))
-    outcome = SweepResult(plan)
-    for run in plan.runs:
-        first = 50 if run.variant == "2stepahead" else 150
-        final = {"dueling-dqn": 0.2, "2stepahead-maspm": 0.9}.get(run.variant, 0.5)
-        success = [episode >= first + run.seed for episode in range(300)]
-        returns = [final + 0.01 * run.seed if episode >= 100 else 0.0 for episode in range(300)]
-        path = plan.run_dir(run) / "training" / run.variant / f"seed-{run.seed}.parquet"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(pa.table({"return": returns, "success": success}), path)
-        outcome.results[run] = {"status": "done", "metrics": {"success": 0.9}}
-    write_results(outcome)
+    _seeds_study([0, 1, 2, 3, 4])
     horizon = plan_sweep(
         "horizon",
         StudyParams(variants=["2stepahead"], seeds=[0, 1, 2], grid={"agent.horizon": [2, 8]}),
