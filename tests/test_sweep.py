@@ -20,6 +20,7 @@ import torch
 import yaml
 from typer.testing import CliRunner
 
+from pipeline.agents.params import VARIANT_NAMES
 from pipeline.cli import app
 from pipeline.config import ConfigError, StudyParams, load_params
 from pipeline.sweep import (
@@ -117,16 +118,13 @@ def test_the_horizon_claim_is_checked_on_paired_seeds(sweepdir: Path) -> None:
     assert horizon_verdict(SweepResult(other)) is None
 
 
-VARIANTS = ["dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm", "2stepahead-maspm"]
-
-
 def _seeds_study(seeds: list[int]) -> SweepResult:
     """A finished `seeds` study of every variant, its results written: 2stepahead succeeds from
     its 50th episode on, the others from their 150th; the world-model variants end at a higher
     return than dueling-dqn, 2stepahead-maspm at the highest."""
     import pyarrow as pa
 
-    plan = plan_sweep("seeds", StudyParams(variants=VARIANTS, seeds=seeds))
+    plan = plan_sweep("seeds", StudyParams(variants=list(VARIANT_NAMES), seeds=seeds))
     outcome = SweepResult(plan)
     for run in plan.runs:
         first = 50 if run.variant == "2stepahead" else 150
@@ -157,7 +155,7 @@ def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> No
     assert set(claims([0, 1, 2]).values()) == {"inconclusive"}
     # A study with a grid mixes its grid values' seeds: no training claims.
     grid = plan_sweep(
-        "g", StudyParams(variants=VARIANTS[:2], seeds=[0], grid={"agent.gamma": [0.9]})
+        "g", StudyParams(variants=list(VARIANT_NAMES[:2]), seeds=[0], grid={"agent.gamma": [0.9]})
     )
     assert training_claims(SweepResult(grid)) is None
 
