@@ -18,12 +18,12 @@ import argparse
 
 import numpy as np
 
-from pipeline.config import EvalParams
-from pipeline.env.params import EnvParams
-from pipeline.env.rollout import run_episodes
-from pipeline.planning.models import ConstantVelocityModel
-from pipeline.planning.mpc import Planner
-from pipeline.planning.params import PlanningParams
+from socnav_wm.config import EvalParams
+from socnav_wm.env.params import EnvParams
+from socnav_wm.env.rollout import run_episodes
+from socnav_wm.planning.models import ConstantVelocityModel
+from socnav_wm.planning.mpc import Planner
+from socnav_wm.planning.params import PlanningParams
 
 
 def main(argv: list[str] | None = None) -> dict[str, int]:
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> dict[str, int]:
 
     env_params = EnvParams()
     if args.model:
-        from pipeline.worldmodel.residual import ResidualPlanningModel, load_residual
+        from socnav_wm.worldmodel.residual import ResidualPlanningModel, load_residual
 
         model = ResidualPlanningModel(load_residual(args.model), env_params)
     else:

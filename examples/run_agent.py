@@ -15,9 +15,9 @@ import argparse
 
 import gymnasium as gym
 
-import pipeline.env  # noqa: F401  (registers SocNav-v0)
-from pipeline.agents.agent_file import load_agent
-from pipeline.config import EvalParams
+import socnav_wm.env  # noqa: F401  (registers SocNav-v0)
+from socnav_wm.agents.agent_file import load_agent
+from socnav_wm.config import EvalParams
 
 
 def main(argv: list[str] | None = None) -> list[str]:

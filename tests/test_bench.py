@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from pipeline.agents.params import AgentParams
-from pipeline.bench import bench_train
+from socnav_wm.agents.params import AgentParams
+from socnav_wm.bench import bench_train
 
 
 def test_bench_train_reports_both_rates() -> None:
@@ -21,7 +21,7 @@ def test_bench_train_reports_both_rates() -> None:
 
 
 def test_bench_contention_measures_the_stage_alone_and_beside_busy_processes() -> None:
-    from pipeline.bench import bench_contention
+    from socnav_wm.bench import bench_contention
 
     tiny = ("collect.episodes=16", "collect.num_envs=8", "vae.max_epochs=1", "vae.hidden_dim=16",
             "vae.device=cpu")  # fmt: skip
@@ -32,7 +32,7 @@ def test_bench_contention_measures_the_stage_alone_and_beside_busy_processes() -
 
 
 def test_bench_contention_runs_each_torch_stage_on_inputs_it_makes_first() -> None:
-    from pipeline.bench import bench_contention
+    from socnav_wm.bench import bench_contention
 
     tiny = ("collect.episodes=16", "collect.num_envs=8", "vae.max_epochs=1", "vae.hidden_dim=16",
             "vae.device=cpu", "lstm.max_epochs=1", "lstm.hidden_dim=16", "lstm.seq_len=4",

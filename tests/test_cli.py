@@ -10,7 +10,7 @@ import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
-from pipeline.cli import app
+from socnav_wm.cli import app
 
 runner = CliRunner()
 
@@ -45,7 +45,7 @@ def test_render_rejects_an_unknown_policy_in_one_line(tmp_path: Path) -> None:
 @pytest.mark.parametrize("policy", ["orca", "cv-mpc", "agent-file"])
 def test_render_any_method_on_chosen_scenarios(tmp_path: Path, policy: str) -> None:
     """A baseline, a planner or a trained agent's file, on the scenarios asked for."""
-    from pipeline.env import EnvParams
+    from socnav_wm.env import EnvParams
     from tests.evaluation.conftest import save_tiny_agent
 
     if policy == "agent-file":
@@ -122,7 +122,7 @@ def test_a_bad_setting_is_reported_before_torch_or_mlflow_is_imported(tmp_path: 
 
     code = (
         "import sys\n"
-        "from pipeline.cli import app\n"
+        "from socnav_wm.cli import app\n"
         "try:\n"
         "    app(['train-agent', '--variant', 'maspm', '--set', 'agent.gamma=2'])\n"
         "except SystemExit as exit:\n"
@@ -142,7 +142,7 @@ def test_the_cli_limits_openmp_spinning_unless_told_otherwise() -> None:
     import sys
 
     show = (
-        "import os, pipeline.cli; "
+        "import os, socnav_wm.cli; "
         "print(os.environ['OMP_WAIT_POLICY'], os.environ['GOMP_SPINCOUNT'])"
     )
     env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT")}
@@ -172,7 +172,7 @@ def test_train_planning_model_trains_and_writes_its_outputs(tmp_path: Path) -> N
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "constant velocity" in result.output and "wrote" in result.output
-    from pipeline.worldmodel.residual import load_residual
+    from socnav_wm.worldmodel.residual import load_residual
 
     assert load_residual(tmp_path / "models" / "seed-1.pt").net[0].out_features == 8
     metrics = json.loads((tmp_path / "metrics" / "seed-1.json").read_text())

@@ -11,9 +11,9 @@ import pytest
 import yaml
 from pydantic import BaseModel
 
-from pipeline.agents.baselines import OrcaBaselineParams, SfmBaselineParams, make_baseline
-from pipeline.agents.params import VARIANT_NAMES, AgentParams
-from pipeline.config import (
+from socnav_wm.agents.baselines import OrcaBaselineParams, SfmBaselineParams, make_baseline
+from socnav_wm.agents.params import VARIANT_NAMES, AgentParams
+from socnav_wm.config import (
     STAGE_SECTIONS,
     ConfigError,
     Params,
@@ -22,7 +22,7 @@ from pipeline.config import (
     params_dict,
     save_resolved,
 )
-from pipeline.env.params import EnvParams
+from socnav_wm.env.params import EnvParams
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "params.yaml"
@@ -326,7 +326,7 @@ def test_flatten_uses_dotted_keys() -> None:
     assert flatten({"a": {"b": {"c": 1}, "d": {}}}) == {"a.b.c": 1, "a.d": {}}
 
 
-# --- the agent section (pipeline/agents/params.py) ----------------------------------------------
+# --- the agent section (socnav_wm/agents/params.py) ----------------------------------------------
 
 
 def test_agent_section_shares_the_library_model(tmp_path: Path) -> None:

@@ -34,7 +34,7 @@ def test_relative_links_point_to_files(document: Path) -> None:
 
 
 def test_the_report_writes_into_the_readme_and_docs_evaluation() -> None:
-    from pipeline.stages.report import RESULTS_DOCUMENTS
+    from socnav_wm.stages.report import RESULTS_DOCUMENTS
 
     for document in RESULTS_DOCUMENTS:
         text = (ROOT / document).read_text(encoding="utf-8")

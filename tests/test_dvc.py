@@ -73,7 +73,7 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
     assert (repo / "mlflow.db").exists()
 
     # Compiled-kernel and bytecode caches appearing next to the code change no stage.
-    cache = repo / "pipeline/env/__pycache__"
+    cache = repo / "socnav_wm/env/__pycache__"
     cache.mkdir(exist_ok=True)
     (cache / "core.step-1.py311.nbi").write_bytes(b"numba index")
     (cache / "core.cpython-311.pyc").write_bytes(b"bytecode")
@@ -147,7 +147,7 @@ def test_dvc_repro_runs_the_pipeline_and_reruns_only_what_changed(repo: Path) ->
 
     # An edit of the reward makes every stage that can execute it stale: the data, every
     # training, every evaluation, the baselines' included (their import closure has it).
-    reward = repo / "pipeline/env/reward.py"
+    reward = repo / "socnav_wm/env/reward.py"
     reward.write_text(reward.read_text() + "# an edit\n")
     output = _dvc(repo, "status", "--json")
     stale = set(json.loads(output[output.index("{") : output.rindex("}") + 1]))

@@ -1,4 +1,4 @@
-"""dvc.yaml's source deps are each stage's import closure (pipeline.stages.deps)."""
+"""dvc.yaml's source deps are each stage's import closure (socnav_wm.stages.deps)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.stages.deps import (
+from socnav_wm.stages.deps import (
     STAGE_MODULES,
     dvc_yaml_differences,
     import_closure,
@@ -50,37 +50,37 @@ def test_the_studies_are_a_pipeline_of_their_own() -> None:
 def test_a_missing_or_extra_dependency_is_reported(tmp_path: Path) -> None:
     spec = yaml.safe_load((ROOT / "dvc.yaml").read_text())
     baseline = spec["stages"]["evaluate_baseline"]["do"]
-    baseline["deps"].remove("pipeline/env/reward.py")
-    spec["stages"]["collect"]["deps"].append("pipeline/evaluation/figures.py")
+    baseline["deps"].remove("socnav_wm/env/reward.py")
+    spec["stages"]["collect"]["deps"].append("socnav_wm/evaluation/figures.py")
     (tmp_path / "dvc.yaml").write_text(yaml.safe_dump(spec))
     problems = dvc_yaml_differences(tmp_path / "dvc.yaml")
     assert len(problems) == 2
-    assert any("evaluate_baseline: missing pipeline/env/reward.py" in p for p in problems)
-    assert any("collect: missing nothing; not executed pipeline/evaluation/figures.py" in p
+    assert any("evaluate_baseline: missing socnav_wm/env/reward.py" in p for p in problems)
+    assert any("collect: missing nothing; not executed socnav_wm/evaluation/figures.py" in p
                for p in problems)  # fmt: skip
 
 
 def test_the_closure_follows_imports_inside_functions_and_packages() -> None:
     deps = stage_dependencies()
     # evaluate_method imports the baselines inside a function; the simulator reaches the
-    # reward through its package; every stage runs pipeline/__init__.py and its own module.
-    assert "pipeline/agents/baselines.py" in deps["evaluate_baseline"]
+    # reward through its package; every stage runs socnav_wm/__init__.py and its own module.
+    assert "socnav_wm/agents/baselines.py" in deps["evaluate_baseline"]
     for stage in ("collect", "train_agent", "evaluate", "evaluate_baseline"):
-        assert "pipeline/env/reward.py" in deps[stage], stage
+        assert "socnav_wm/env/reward.py" in deps[stage], stage
     for stage, files in deps.items():
         own = STAGE_MODULES[stage].replace(".", "/") + ".py"
-        assert "pipeline/__init__.py" in files and own in files, stage
-        assert "pipeline/cli.py" not in files and "pipeline/tracking.py" not in files
+        assert "socnav_wm/__init__.py" in files and own in files, stage
+        assert "socnav_wm/cli.py" not in files and "socnav_wm/tracking.py" not in files
     # A stage does not depend on what it never runs.
-    assert "pipeline/evaluation/figures.py" not in deps["train_agent"]
-    assert "pipeline/agents/learner.py" not in deps["collect"]
-    assert import_closure("pipeline.stages.train_vae") == deps["train_vae"]
+    assert "socnav_wm/evaluation/figures.py" not in deps["train_agent"]
+    assert "socnav_wm/agents/learner.py" not in deps["collect"]
+    assert import_closure("socnav_wm.stages.train_vae") == deps["train_vae"]
 
 
 def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> None:
     text = (ROOT / "dvc.yaml").read_text()
-    broken = text.replace("      - pipeline/env/reward.py\n", "", 1).replace(
-        "      - pipeline/io.py\n", "      - pipeline/io.py\n      - pipeline/cli.py\n", 1
+    broken = text.replace("      - socnav_wm/env/reward.py\n", "", 1).replace(
+        "      - socnav_wm/io.py\n", "      - socnav_wm/io.py\n      - socnav_wm/cli.py\n", 1
     )
     target = tmp_path / "dvc.yaml"
     target.write_text(broken)
@@ -94,7 +94,7 @@ def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> 
 def test_predict_measures_every_planning_model_seed() -> None:
     """The stage names no seed: it reads planning_model.seeds (a param of the stage) and the
     folder that holds every seed's model (a dependency), so a change of the seeds reruns it."""
-    from pipeline.stages.train_planning_model import model_path
+    from socnav_wm.stages.train_planning_model import model_path
 
     stages = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
     stage = stages["predict"]

@@ -28,7 +28,7 @@ def test_sb3_dqn_trains_and_tests_on_the_registered_env(capsys) -> None:
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory: pytest.TempPathFactory):
     """The tiny configuration and a folder for what its stages write."""
-    from pipeline.config import load_params
+    from socnav_wm.config import load_params
     from tests.conftest import ROOT, TINY_OVERLAY
 
     return load_params(ROOT / "params.yaml", overlays=[TINY_OVERLAY]), tmp_path_factory.mktemp(
@@ -49,8 +49,8 @@ def test_run_agent_loads_a_trained_agent_and_matches_the_evaluation(tiny, capsys
     env by the example: the same outcomes, scenario by scenario, as the evaluation's runner."""
     import torch
 
-    from pipeline.agents.agent_file import greedy_episodes, load_agent
-    from pipeline.stages import train_agent
+    from socnav_wm.agents.agent_file import greedy_episodes, load_agent
+    from socnav_wm.stages import train_agent
 
     params, folder = tiny
     before = torch.get_num_threads()
@@ -77,7 +77,7 @@ def test_run_agent_loads_a_trained_agent_and_matches_the_evaluation(tiny, capsys
 def test_plan_with_constant_velocity_and_with_a_trained_planning_model(tiny, capsys) -> None:
     """The planner on constant velocity, then on a planning model trained by the
     train_planning_model stage on rollouts of the collect stage (tiny budgets)."""
-    from pipeline.stages import collect, train_planning_model
+    from socnav_wm.stages import collect, train_planning_model
 
     params, folder = tiny
     small = ["--episodes", "3", "--horizon", "4", "--prefix-length", "1", "--scenario-seed", "5"]

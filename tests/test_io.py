@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.io import (
+from socnav_wm.io import (
     OutputError,
     atomic_path,
     check_writable,

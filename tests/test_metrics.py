@@ -1,4 +1,4 @@
-"""Tests for pipeline.metrics: every metric on small hand-made trajectories, numbers by hand."""
+"""Tests for socnav_wm.metrics: every metric on small hand-made trajectories, numbers by hand."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from pipeline import metrics as m
-from pipeline.metrics import MetricParams, Trajectory, episode_metrics
+from socnav_wm import metrics as m
+from socnav_wm.metrics import MetricParams, Trajectory, episode_metrics
 
 
 def make_traj(

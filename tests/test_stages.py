@@ -12,7 +12,7 @@ import torch
 import yaml
 from typer.testing import CliRunner
 
-from pipeline.cli import app
+from socnav_wm.cli import app
 from tests.conftest import tiny_params
 
 TINY = tiny_params()
@@ -66,7 +66,7 @@ def test_collect_vae_lstm_write_every_output_and_mlflow_runs(workdir: Path) -> N
     import mlflow.pytorch
     from mlflow.models import get_model_info
 
-    from pipeline.worldmodel.training import load_lstm, load_vae
+    from socnav_wm.worldmodel.training import load_lstm, load_vae
 
     lstm_run = next(run for run in runs if run.data.tags["stage"] == "train-lstm")
     for run, inputs, outputs in (
@@ -250,7 +250,7 @@ def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
     import mlflow.pytorch
     from mlflow.models import get_model_info
 
-    from pipeline.agents.agent_file import load_agent
+    from socnav_wm.agents.agent_file import load_agent
 
     maspm_run = trained["train-agent/2stepahead-maspm/seed-0"]
     signature = get_model_info(f"runs:/{maspm_run}/model").signature
@@ -337,8 +337,8 @@ def test_cuda_without_a_gpu_is_one_line_before_any_run(
 def test_stage_functions_run_without_the_cli(tmp_path: Path) -> None:
     """The stage bodies are library functions: called directly on the params file plus the
     tiny overlay, they write their outputs where they are told."""
-    from pipeline.config import load_params
-    from pipeline.stages import collect, train_vae
+    from socnav_wm.config import load_params
+    from socnav_wm.stages import collect, train_vae
     from tests.conftest import TINY_OVERLAY
 
     root = Path(__file__).resolve().parents[1]
@@ -367,7 +367,7 @@ def test_sigterm_ends_the_run_killed_and_leaves_no_output(workdir: Path) -> None
 
     from mlflow.tracking import MlflowClient
 
-    cli = [sys.executable, "-c", "from pipeline.cli import app; app()"]
+    cli = [sys.executable, "-c", "from socnav_wm.cli import app; app()"]
     process = subprocess.Popen(
         [*cli, "collect", "--quiet", "--set", "collect.episodes=200000"],
         env={**os.environ, "OMP_NUM_THREADS": "1"},

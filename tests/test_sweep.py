@@ -20,10 +20,10 @@ import torch
 import yaml
 from typer.testing import CliRunner
 
-from pipeline.agents.params import VARIANT_NAMES
-from pipeline.cli import app
-from pipeline.config import ConfigError, StudyParams, load_params
-from pipeline.sweep import (
+from socnav_wm.agents.params import VARIANT_NAMES
+from socnav_wm.cli import app
+from socnav_wm.config import ConfigError, StudyParams, load_params
+from socnav_wm.sweep import (
     SweepResult,
     _interval,
     horizon_verdict,
@@ -35,7 +35,7 @@ from pipeline.sweep import (
     training_claims,
     write_results,
 )
-from pipeline.worldmodel.training import save_lstm, save_vae
+from socnav_wm.worldmodel.training import save_lstm, save_vae
 from tests.agents.conftest import tiny_world_model
 from tests.conftest import tiny_params
 
@@ -57,7 +57,7 @@ def _invoke(*args: str):
 
 
 def _weights(path: Path) -> dict[str, torch.Tensor]:
-    from pipeline.agents.agent_file import load_agent
+    from socnav_wm.agents.agent_file import load_agent
 
     return load_agent(path).q_network.state_dict()
 
@@ -161,8 +161,8 @@ def test_a_study_without_a_grid_checks_the_training_claims(sweepdir: Path) -> No
 
 
 def test_study_claims_take_each_claim_from_the_study_that_checks_it(sweepdir: Path) -> None:
-    from pipeline.evaluation.paper import CLAIMS
-    from pipeline.stages import study_claims
+    from socnav_wm.evaluation.paper import CLAIMS
+    from socnav_wm.stages import study_claims
 
     # The report: every claim inconclusive, one check each (its claims.json's shape).
     report = {
@@ -267,13 +267,13 @@ def test_only_the_runs_that_read_the_world_model_depend_on_its_files(sweepdir: P
 def test_an_edit_of_the_code_a_run_executes_makes_its_result_stale(
     sweepdir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import pipeline.stages.deps as deps
+    import socnav_wm.stages.deps as deps
 
     sources = run_sources()
-    assert "pipeline/env/reward.py" in sources and "pipeline/agents/learner.py" in sources
-    assert "pipeline/sweep.py" not in sources and "pipeline/stages/report.py" not in sources
-    assert "pipeline/config.py" not in sources  # it acts through the parameters, fingerprinted
-    copy = tmp_path / "src" / "pipeline"
+    assert "socnav_wm/env/reward.py" in sources and "socnav_wm/agents/learner.py" in sources
+    assert "socnav_wm/sweep.py" not in sources and "socnav_wm/stages/report.py" not in sources
+    assert "socnav_wm/config.py" not in sources  # it acts through the parameters, fingerprinted
+    copy = tmp_path / "src" / "socnav_wm"
     shutil.copytree(deps.PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
     monkeypatch.setattr(deps, "PACKAGE_ROOT", copy)
     study = StudyParams(variants=["dueling-dqn", "maspm"], seeds=[0, 1])
@@ -316,7 +316,7 @@ def test_without_ray_a_sweep_fails_in_one_line(
 
 
 def test_other_commands_do_not_import_ray() -> None:
-    code = "import sys, pipeline.cli, pipeline.sweep; print('ray' in sys.modules)"
+    code = "import sys, socnav_wm.cli, socnav_wm.sweep; print('ray' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
@@ -427,7 +427,7 @@ def test_an_interrupted_sweep_resumes_from_its_checkpoints(sweepdir: Path) -> No
     params["agent"].update(episodes=120, checkpoint_every=4)
     Path("params.yaml").write_text(yaml.safe_dump(params))
     command = [
-        sys.executable, "-m", "pipeline.cli", "sweep", "--variants", "dueling-dqn",
+        sys.executable, "-m", "socnav_wm.cli", "sweep", "--variants", "dueling-dqn",
         "--seeds", "0-1", "--name", "cut", "--cpus", "2", "--no-tracking",
     ]  # fmt: skip
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
@@ -451,7 +451,7 @@ def test_an_interrupted_sweep_resumes_from_its_checkpoints(sweepdir: Path) -> No
     # Exact resume: the resumed run's weights are those of one uninterrupted training.
     resumed = next(r for r in results if r["resumed"])
     subprocess.run(
-        [sys.executable, "-m", "pipeline.cli", "train-agent", "--variant", "dueling-dqn",
+        [sys.executable, "-m", "socnav_wm.cli", "train-agent", "--variant", "dueling-dqn",
          "--seed", str(resumed["seed"]), "--out-dir", "serial", "--threads", "1",
          "--no-tracking", "--quiet"],
         env=env, check=True, capture_output=True,

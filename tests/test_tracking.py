@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.tracking import TrackingError, check_tracking, stage_run, tracking_uri
+from socnav_wm.tracking import TrackingError, check_tracking, stage_run, tracking_uri
 
 mlflow = pytest.importorskip("mlflow")
 
@@ -151,7 +151,7 @@ def test_disabled_run_is_a_no_op_and_never_imports_mlflow(tmp_path: Path) -> Non
     script = f"""
 import os, sys
 os.environ["MLFLOW_TRACKING_URI"] = "sqlite:///{db}"
-from pipeline.tracking import stage_run
+from socnav_wm.tracking import stage_run
 with stage_run("collect", {{"seed": 1}}, enabled=False) as run:
     run.log_metrics({{"x": 1.0}}, step=0)
     run.log_params({{"y": 2}})
@@ -169,7 +169,7 @@ assert "mlflow" not in sys.modules, "mlflow was imported"
 
 def test_importing_the_pipeline_does_not_import_mlflow() -> None:
     script = (
-        "import sys, pipeline.config, pipeline.io, pipeline.progress, pipeline.tracking\n"
+        "import sys, socnav_wm.config, socnav_wm.io, socnav_wm.progress, socnav_wm.tracking\n"
         "assert 'mlflow' not in sys.modules\n"
         "assert 'rich.progress' not in sys.modules\n"
     )
@@ -240,9 +240,9 @@ def test_default_uri_is_sqlite_at_the_repository_root(
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
     monkeypatch.delenv("DVC_ROOT", raising=False)
     repo = tmp_path / "repo"
-    (repo / "pipeline").mkdir(parents=True)
+    (repo / "socnav_wm").mkdir(parents=True)
     (repo / "dvc.yaml").write_text("stages: {}\n")
-    monkeypatch.chdir(repo / "pipeline")  # a command started below the root
+    monkeypatch.chdir(repo / "socnav_wm")  # a command started below the root
     assert tracking_uri() == f"sqlite:///{repo.resolve()}/mlflow.db"
     # Under `dvc exp run --queue/--temp`, DVC_ROOT names the user's repository, not the
     # temporary workspace the stage runs in.

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from pipeline.worldmodel.lstm import LatentLSTM
-from pipeline.worldmodel.training import save_lstm, save_vae
-from pipeline.worldmodel.vae import VAE
+from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.training import save_lstm, save_vae
+from socnav_wm.worldmodel.vae import VAE
 
 # The native update (test_native.py) compiles into a cache folder: the tests' own, not the user's.
 if not os.environ.get("SOCNAV_WM_CACHE_DIR"):

@@ -8,15 +8,15 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from pipeline.agents.baselines import (
+from socnav_wm.agents.baselines import (
     BASELINES,
     OrcaBaselineParams,
     SfmBaselineParams,
     make_baseline,
     unicycle_command,
 )
-from pipeline.env import EnvParams, Simulator
-from pipeline.env.state import BatchState
+from socnav_wm.env import EnvParams, Simulator
+from socnav_wm.env.state import BatchState
 
 V_MAX = 0.14
 W_MAX = 0.387596899

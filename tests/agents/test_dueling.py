@@ -5,10 +5,10 @@ import pytest
 import torch
 from torch import nn
 
-from pipeline.agents.dueling import DuelingQNetwork, dueling_q_values
-from pipeline.agents.learner import DQNLearner
-from pipeline.agents.params import AgentParams
-from pipeline.agents.replay import Batch
+from socnav_wm.agents.dueling import DuelingQNetwork, dueling_q_values
+from socnav_wm.agents.learner import DQNLearner
+from socnav_wm.agents.params import AgentParams
+from socnav_wm.agents.replay import Batch
 
 
 def test_dueling_aggregation_by_hand() -> None:

@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.agents.features import (
+from socnav_wm.agents.features import (
     STOP,
     VARIANTS,
     WorldModelState,
     make_variant,
     sort_humans_by_distance,
 )
-from pipeline.agents.params import AgentParams
-from pipeline.env import EnvParams, Simulator
+from socnav_wm.agents.params import AgentParams
+from socnav_wm.env import EnvParams, Simulator
 from tests.agents.conftest import HIDDEN, LATENT, OBS_DIM, tiny_world_model
 
 NUM_ENVS = 5
@@ -78,8 +78,8 @@ def test_feature_sizes(name: str, options: dict, size: int) -> None:
 
 
 def test_paper_sizes_with_the_paper_world_model() -> None:
-    from pipeline.worldmodel.lstm import LatentLSTM
-    from pipeline.worldmodel.vae import VAE
+    from socnav_wm.worldmodel.lstm import LatentLSTM
+    from socnav_wm.worldmodel.vae import VAE
 
     vae, lstm = VAE(23, 256, 16), LatentLSTM(16, 4, 256)
     sizes = {name: make_variant(name, vae, lstm, options()).feature_dim for name in VARIANTS}

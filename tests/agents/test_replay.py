@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.agents.replay import Batch, NStepAccumulator, ReplayBuffer
+from socnav_wm.agents.replay import Batch, NStepAccumulator, ReplayBuffer
 
 
 def fill(buffer: ReplayBuffer, start: int, n: int) -> None:

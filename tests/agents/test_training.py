@@ -9,25 +9,25 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from pipeline.agents.agent_file import (
+from socnav_wm.agents.agent_file import (
     AgentFileError,
     agent_from_result,
     greedy_episodes,
     load_agent,
     save_agent,
 )
-from pipeline.agents.learner import DQNLearner, double_dqn_targets
-from pipeline.agents.params import AgentParams
-from pipeline.agents.replay import Batch
-from pipeline.agents.training import (
+from socnav_wm.agents.learner import DQNLearner, double_dqn_targets
+from socnav_wm.agents.params import AgentParams
+from socnav_wm.agents.replay import Batch
+from socnav_wm.agents.training import (
     EPISODE_COLUMNS,
     episodes_to_solve,
     selection_seed,
     train_agent,
 )
-from pipeline.config import load_params
-from pipeline.env import EnvParams
-from pipeline.worldmodel.training import save_vae
+from socnav_wm.config import load_params
+from socnav_wm.env import EnvParams
+from socnav_wm.worldmodel.training import save_vae
 from tests.agents.conftest import tiny_world_model
 
 # A small empty room: the robot only has to turn towards the goal and drive there.

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.data.collect import collect_rollouts
-from pipeline.data.shards import column_to_numpy, read_rollouts, validate_episodes
-from pipeline.env import EnvParams
+from socnav_wm.data.collect import collect_rollouts
+from socnav_wm.data.shards import column_to_numpy, read_rollouts, validate_episodes
+from socnav_wm.env import EnvParams
 
 
 def _collect(tmp_path: Path, name: str, num_envs: int, episodes: int = 24, **kwargs):

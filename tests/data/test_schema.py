@@ -2,7 +2,7 @@
 
 import pyarrow as pa
 
-from pipeline.data.schema import (
+from socnav_wm.data.schema import (
     COLLISION_HUMAN,
     COLLISION_NONE,
     COLLISION_WALL,

@@ -7,8 +7,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from pipeline.data.schema import COLUMN_NAMES, METADATA_SCHEMA_VERSION, rollout_schema
-from pipeline.data.shards import (
+from socnav_wm.data.schema import COLUMN_NAMES, METADATA_SCHEMA_VERSION, rollout_schema
+from socnav_wm.data.shards import (
     RolloutError,
     ShardWriter,
     column_to_numpy,

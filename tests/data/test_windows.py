@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.data.windows import make_windows, split_episodes
+from socnav_wm.data.windows import make_windows, split_episodes
 
 
 def encoded_episodes(lengths: list[int]) -> tuple[np.ndarray, ...]:

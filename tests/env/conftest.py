@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.env import EnvParams, Simulator
+from socnav_wm.env import EnvParams, Simulator
 
 
 def frozen_humans_params(**overrides) -> EnvParams:

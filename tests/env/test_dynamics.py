@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.env import EnvParams, Simulator
-from pipeline.env.state import COLLISION_HUMAN, COLLISION_NONE, COLLISION_WALL
+from socnav_wm.env import EnvParams, Simulator
+from socnav_wm.env.state import COLLISION_HUMAN, COLLISION_NONE, COLLISION_WALL
 from tests.env.conftest import frozen_humans_params, place
 
 STOP, FORWARD, LEFT, RIGHT = 0, 1, 2, 3

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import pipeline.env  # noqa: F401  (registers SocNav-v0)
-from pipeline.env.gym import SocNavEnv, SocNavVectorEnv
+import socnav_wm.env  # noqa: F401  (registers SocNav-v0)
+from socnav_wm.env.gym import SocNavEnv, SocNavVectorEnv
 
 
 def test_make_passes_gymnasiums_env_checker() -> None:
@@ -144,7 +144,7 @@ def test_vector_env_refuses_non_integer_or_out_of_range_actions(actions) -> None
 def test_huge_seeds_are_reduced_and_in_range_seeds_unchanged() -> None:
     env = SocNavEnv()
     small, _ = env.reset(seed=7)
-    from pipeline.env import Simulator
+    from socnav_wm.env import Simulator
 
     sim = Simulator(1)
     np.testing.assert_array_equal(sim.reset(seed=7)[0][0], small)
@@ -204,7 +204,7 @@ def test_the_core_install_is_enough_for_the_environment() -> None:
 
     code = (
         "import sys, gymnasium as gym\n"
-        "env = gym.make('pipeline.env:SocNav-v0')\n"
+        "env = gym.make('socnav_wm.env:SocNav-v0')\n"
         "env.reset(seed=0); env.step(1)\n"
         "heavy = ('torch', 'mlflow', 'dvc', 'pyarrow', 'typer', 'matplotlib', 'rich')\n"
         "print(sorted(m for m in heavy if m in sys.modules))\n"

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.env import EnvParams, Simulator
-from pipeline.env.humans import move_humans
-from pipeline.env.scenario import draw_human_goal
+from socnav_wm.env import EnvParams, Simulator
+from socnav_wm.env.humans import move_humans
+from socnav_wm.env.scenario import draw_human_goal
 
 STOP = 0
 
@@ -144,7 +144,7 @@ def test_no_human_moves_more_than_max_speed_dt_over_1000_random_episodes() -> No
 
 
 def test_velocities_are_capped_at_max_speed_whatever_the_policy_returns(monkeypatch) -> None:
-    from pipeline.env import humans
+    from socnav_wm.env import humans
 
     params = EnvParams(human_policy="orca")
     sim = Simulator(1, params)

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 import pytest
 
-from pipeline.env.orca import (
+from socnav_wm.env.orca import (
     Obstacles,
     OrcaParams,
     make_obstacles,

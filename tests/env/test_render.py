@@ -1,4 +1,4 @@
-"""Tests for pipeline.env.render: frame geometry and colours, GIF writing, frame grids."""
+"""Tests for socnav_wm.env.render: frame geometry and colours, GIF writing, frame grids."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipeline.env import render as r
-from pipeline.env.render import Scene, render_frame, tile_frames, write_gif
+from socnav_wm.env import render as r
+from socnav_wm.env.render import Scene, render_frame, tile_frames, write_gif
 
 
 def make_scene(**overrides) -> Scene:

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.env import Simulator
-from pipeline.env.observation import observation_names, observation_size, observe
+from socnav_wm.env import Simulator
+from socnav_wm.env.observation import observation_names, observation_size, observe
 from tests.env.conftest import frozen_humans_params, place
 
 STOP, FORWARD = 0, 1

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.env import EnvParams, Simulator
-from pipeline.env.scenario import (
+from socnav_wm.env import EnvParams, Simulator
+from socnav_wm.env.scenario import (
     MAX_GOAL_ATTEMPTS,
     POLICY_ORCA,
     POLICY_SFM,

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-import pipeline.env  # noqa: F401 - registers SocNav-v0
-from pipeline.agents.features import sort_humans_by_distance
-from pipeline.env import EnvParams, Simulator
-from pipeline.env.wrappers import (
+import socnav_wm.env  # noqa: F401 - registers SocNav-v0
+from socnav_wm.agents.features import sort_humans_by_distance
+from socnav_wm.env import EnvParams, Simulator
+from socnav_wm.env.wrappers import (
     NearestHumansFirst,
     ProgressReward,
     goal_distance,

@@ -9,8 +9,8 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from pipeline.env.params import EnvParams
-from pipeline.evaluation.evaluate import EvaluationResult, evaluate_method, write_evaluation
+from socnav_wm.env.params import EnvParams
+from socnav_wm.evaluation.evaluate import EvaluationResult, evaluate_method, write_evaluation
 
 # Short episodes (80 steps) so that some time out: every outcome path gets exercised.
 TEST_ENV = EnvParams(max_steps=80)
@@ -93,11 +93,11 @@ def save_tiny_agent(path: Path, variant: str, env_params: EnvParams, seed: int) 
     """
     import torch
 
-    from pipeline.agents.agent_file import env_params_obs_dim, save_agent
-    from pipeline.agents.dueling import DuelingQNetwork
-    from pipeline.agents.features import VARIANTS, make_variant
-    from pipeline.agents.params import AgentParams
-    from pipeline.agents.training import TrainResult
+    from socnav_wm.agents.agent_file import env_params_obs_dim, save_agent
+    from socnav_wm.agents.dueling import DuelingQNetwork
+    from socnav_wm.agents.features import VARIANTS, make_variant
+    from socnav_wm.agents.params import AgentParams
+    from socnav_wm.agents.training import TrainResult
     from tests.agents.conftest import tiny_world_model
 
     vae = lstm = None

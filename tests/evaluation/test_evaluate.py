@@ -12,8 +12,8 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
-from pipeline.env.core import discrete_commands
-from pipeline.evaluation.evaluate import (
+from socnav_wm.env.core import discrete_commands
+from socnav_wm.evaluation.evaluate import (
     AGENT_METHODS,
     BASELINE_METHODS,
     BASELINE_SEED,
@@ -29,8 +29,8 @@ from pipeline.evaluation.evaluate import (
     summarise,
     write_evaluation,
 )
-from pipeline.evaluation.stats import mean_ci_crossed
-from pipeline.metrics import ALL_METRICS, PAPER_METRICS
+from socnav_wm.evaluation.stats import mean_ci_crossed
+from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
 from tests.evaluation.conftest import (
     EPISODES,
     SCENARIO_SEED,
@@ -47,10 +47,10 @@ def assert_tables_equal(a: pa.Table, b: pa.Table) -> None:
 
 
 def test_method_names_match_the_rest_of_the_project():
-    from pipeline.agents.baselines import BASELINES
-    from pipeline.agents.params import VARIANT_NAMES
-    from pipeline.evaluation.evaluate import PAPER_METHODS, PLANNER_METHODS
-    from pipeline.planning.params import PLANNER_NAMES
+    from socnav_wm.agents.baselines import BASELINES
+    from socnav_wm.agents.params import VARIANT_NAMES
+    from socnav_wm.evaluation.evaluate import PAPER_METHODS, PLANNER_METHODS
+    from socnav_wm.planning.params import PLANNER_NAMES
 
     assert PAPER_METHODS == VARIANT_NAMES + BASELINE_METHODS
     assert METHODS == PAPER_METHODS + PLANNER_METHODS

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipeline.env.params import EnvParams
-from pipeline.env.rollout import Episode
-from pipeline.evaluation.figures import (
+from socnav_wm.env.params import EnvParams
+from socnav_wm.env.rollout import Episode
+from socnav_wm.evaluation.figures import (
     histograms_figure,
     means_figure,
     scenario_frames,
@@ -18,7 +18,7 @@ from pipeline.evaluation.figures import (
     smooth,
     training_curves_figure,
 )
-from pipeline.metrics import PAPER_METRICS
+from socnav_wm.metrics import PAPER_METRICS
 
 
 def test_smooth_is_a_trailing_mean_by_hand():

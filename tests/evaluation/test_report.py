@@ -15,25 +15,25 @@ import pytest
 from PIL import Image
 from scipy import stats as scipy_stats
 
-from pipeline.evaluation import paper
-from pipeline.evaluation.claims import VERDICTS, check_claims
-from pipeline.evaluation.comparisons import clustered_mcnemar, compare, pareto_analysis
-from pipeline.evaluation.evaluate import (
+from socnav_wm.evaluation import paper
+from socnav_wm.evaluation.claims import VERDICTS, check_claims
+from socnav_wm.evaluation.comparisons import clustered_mcnemar, compare, pareto_analysis
+from socnav_wm.evaluation.evaluate import (
     AGENT_METHODS,
     BASELINE_SEED,
     PLANNER_METHODS,
     EvaluationResult,
 )
-from pipeline.evaluation.rendering import fmt_ci
-from pipeline.evaluation.report import (
+from socnav_wm.evaluation.rendering import fmt_ci
+from socnav_wm.evaluation.report import (
     MethodEvaluation,
     build_report,
     load_evaluations,
     load_training_returns,
     training_summary,
 )
-from pipeline.evaluation.stats import mcnemar, mean_ci_crossed, wilcoxon_signed_rank
-from pipeline.metrics import ALL_METRICS, PAPER_METRICS
+from socnav_wm.evaluation.stats import mcnemar, mean_ci_crossed, wilcoxon_signed_rank
+from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
 from tests.evaluation.conftest import (
     EPISODES,
     SCENARIO_SEED,
@@ -244,8 +244,8 @@ def test_the_report_stage_fills_the_results_blocks_of_the_readme_and_the_docs(
 ):
     """Run where the README and docs/evaluation.md are (as `dvc repro` does), the stage writes
     the results table into both blocks and leaves the rest of each file as it was."""
-    from pipeline.config import Params
-    from pipeline.stages import report as stage
+    from socnav_wm.config import Params
+    from socnav_wm.stages import report as stage
 
     root = Path(__file__).resolve().parents[2]
     end = "<!-- /socnav-wm:results -->"
@@ -528,7 +528,7 @@ def test_training_claims_need_enough_seeds_and_follow_the_data():
 def test_an_undecided_training_check_says_how_many_seeds_would_decide_it():
     from scipy import stats
 
-    from pipeline.evaluation.claims import MAX_SEEDS_NEEDED, check_claims, seeds_needed
+    from socnav_wm.evaluation.claims import MAX_SEEDS_NEEDED, check_claims, seeds_needed
 
     rng = np.random.default_rng(0)
     others = ("dueling-dqn", "wm-dueling-dqn", "2stepahead", "maspm")
@@ -583,8 +583,8 @@ def test_training_summary_and_logs(tmp_path):
 
 
 def test_the_planners_are_measured_against_their_ceiling_and_explained():
-    from pipeline.evaluation.evaluate import summarise
-    from pipeline.evaluation.rendering import planning_section
+    from socnav_wm.evaluation.evaluate import summarise
+    from socnav_wm.evaluation.rendering import planning_section
 
     n = 40
     hits = np.zeros(n)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.evaluation.reproduce import compare_runs
+from socnav_wm.evaluation.reproduce import compare_runs
 
 
 def _write(folder: Path, method: str, success: tuple[float, float, float], seed: int = 5) -> None:

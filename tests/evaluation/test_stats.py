@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from pipeline.evaluation.stats import (
+from socnav_wm.evaluation.stats import (
     discordant_odds_ratio,
     dominated_by,
     holm,

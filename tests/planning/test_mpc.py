@@ -1,4 +1,4 @@
-"""The planner (pipeline/planning/mpc.py) and its constant-velocity model."""
+"""The planner (socnav_wm/planning/mpc.py) and its constant-velocity model."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline.config import ConfigError, load_params
-from pipeline.env.params import EnvParams
-from pipeline.evaluation.evaluate import BASELINE_SEED, evaluate_method
-from pipeline.planning.models import ConstantVelocityModel
-from pipeline.planning.mpc import FORWARD, LEFT, RIGHT, STOP, Planner, prefixes, towards_goal
-from pipeline.planning.params import PlanningParams
-from pipeline.worldmodel.ego import predict_positions
+from socnav_wm.config import ConfigError, load_params
+from socnav_wm.env.params import EnvParams
+from socnav_wm.evaluation.evaluate import BASELINE_SEED, evaluate_method
+from socnav_wm.planning.models import ConstantVelocityModel
+from socnav_wm.planning.mpc import FORWARD, LEFT, RIGHT, STOP, Planner, prefixes, towards_goal
+from socnav_wm.planning.params import PlanningParams
+from socnav_wm.worldmodel.ego import predict_positions
 
 ENV = EnvParams()
 

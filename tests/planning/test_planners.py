@@ -8,23 +8,23 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.config import ConfigError, load_params
-from pipeline.env.core import Simulator
-from pipeline.env.observation import observe
-from pipeline.env.params import EnvParams
-from pipeline.env.state import COLLISION_NONE
-from pipeline.evaluation.evaluate import BASELINE_SEED, evaluate_method
-from pipeline.planning.methods import model_files, planner_policy
-from pipeline.planning.models import ConstantVelocityModel
-from pipeline.planning.mpc import Planner, step_gain
-from pipeline.planning.oracle import OraclePlanner, clone_simulator
-from pipeline.planning.params import PlanningParams
-from pipeline.planning.vae_lstm import VaeLstmModel
-from pipeline.worldmodel.lstm import LatentLSTM
-from pipeline.worldmodel.prediction import model_positions, random_policy, record
-from pipeline.worldmodel.residual import ResidualDynamics, ResidualTrainResult, save_residual
-from pipeline.worldmodel.training import save_lstm, save_vae
-from pipeline.worldmodel.vae import VAE
+from socnav_wm.config import ConfigError, load_params
+from socnav_wm.env.core import Simulator
+from socnav_wm.env.observation import observe
+from socnav_wm.env.params import EnvParams
+from socnav_wm.env.state import COLLISION_NONE
+from socnav_wm.evaluation.evaluate import BASELINE_SEED, evaluate_method
+from socnav_wm.planning.methods import model_files, planner_policy
+from socnav_wm.planning.models import ConstantVelocityModel
+from socnav_wm.planning.mpc import Planner, step_gain
+from socnav_wm.planning.oracle import OraclePlanner, clone_simulator
+from socnav_wm.planning.params import PlanningParams
+from socnav_wm.planning.vae_lstm import VaeLstmModel
+from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.prediction import model_positions, random_policy, record
+from socnav_wm.worldmodel.residual import ResidualDynamics, ResidualTrainResult, save_residual
+from socnav_wm.worldmodel.training import save_lstm, save_vae
+from socnav_wm.worldmodel.vae import VAE
 
 ENV = EnvParams()
 
@@ -260,7 +260,7 @@ def test_the_constant_velocity_planner_is_unchanged_by_the_shared_cost() -> None
 
 
 def test_bench_plan_reports_decisions_per_cpu_second(tmp_path) -> None:
-    from pipeline.bench import bench_plan
+    from socnav_wm.bench import bench_plan
 
     tiny_world_model(tmp_path)
     files = {"vae-lstm-mpc": {"vae": tmp_path / "vae.pt", "lstm": tmp_path / "lstm.pt"}}
@@ -284,7 +284,7 @@ def test_bench_plan_reports_decisions_per_cpu_second(tmp_path) -> None:
 def test_evaluate_refuses_model_files_for_a_method_without_them(tmp_path) -> None:
     from typer.testing import CliRunner
 
-    from pipeline.cli import app
+    from socnav_wm.cli import app
 
     (tmp_path / "params.yaml").write_text("seed: 0\n")
     result = CliRunner().invoke(

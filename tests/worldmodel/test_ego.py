@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.env import EnvParams, Simulator
-from pipeline.worldmodel.ego import (
+from socnav_wm.env import EnvParams, Simulator
+from socnav_wm.worldmodel.ego import (
     advance_pose,
     commands_of,
     ego_step,

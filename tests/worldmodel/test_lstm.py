@@ -8,12 +8,12 @@ import pytest
 import torch
 from matplotlib.figure import Figure
 
-from pipeline.config import LstmParams
-from pipeline.data.shards import RolloutError
-from pipeline.data.windows import Windows, make_windows, split_episodes
-from pipeline.worldmodel.fit import fit_lstm
-from pipeline.worldmodel.lstm import LatentLSTM
-from pipeline.worldmodel.training import (
+from socnav_wm.config import LstmParams
+from socnav_wm.data.shards import RolloutError
+from socnav_wm.data.windows import Windows, make_windows, split_episodes
+from socnav_wm.worldmodel.fit import fit_lstm
+from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.training import (
     NonFiniteTrainingError,
     evaluate_lstm,
     load_lstm,
@@ -22,7 +22,7 @@ from pipeline.worldmodel.training import (
     save_vae,
     train_lstm,
 )
-from pipeline.worldmodel.vae import VAE
+from socnav_wm.worldmodel.vae import VAE
 from tests.data.test_shards import make_episodes, write_dataset
 
 LATENT = 4

@@ -1,4 +1,4 @@
-"""k-step prediction errors in metres (pipeline/worldmodel/prediction.py)."""
+"""k-step prediction errors in metres (socnav_wm/worldmodel/prediction.py)."""
 
 from __future__ import annotations
 
@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.env.params import EnvParams
-from pipeline.worldmodel.ego import PREDICTORS
-from pipeline.worldmodel.lstm import LatentLSTM
-from pipeline.worldmodel.prediction import (
+from socnav_wm.env.params import EnvParams
+from socnav_wm.worldmodel.ego import PREDICTORS
+from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.prediction import (
     MODEL_PREDICTOR,
     prediction_errors,
     random_policy,
     record,
 )
-from pipeline.worldmodel.vae import VAE
+from socnav_wm.worldmodel.vae import VAE
 
 ENV = EnvParams()
 
@@ -65,9 +65,9 @@ def test_bad_windows_are_refused(recording) -> None:
 
 
 def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_model) -> None:
-    from pipeline.evaluation.figures import prediction_figure
-    from pipeline.evaluation.rendering import prediction_section
-    from pipeline.worldmodel.prediction import evaluate_prediction
+    from socnav_wm.evaluation.figures import prediction_figure
+    from socnav_wm.evaluation.rendering import prediction_section
+    from socnav_wm.worldmodel.prediction import evaluate_prediction
 
     result = evaluate_prediction(
         ENV, world_model=world_model, agent=None, episodes=5, scenario_seed=3, warmup=2,
@@ -89,7 +89,7 @@ def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_
 
 
 def _planning_models(count: int, perturbed: bool, max_speed: float | None = None):
-    from pipeline.worldmodel.residual import ResidualDynamics
+    from socnav_wm.worldmodel.residual import ResidualDynamics
 
     models = []
     for seed in range(count):
@@ -102,7 +102,7 @@ def _planning_models(count: int, perturbed: bool, max_speed: float | None = None
 
 
 def test_the_untrained_planning_model_is_constant_velocity_on_every_seed(recording) -> None:
-    from pipeline.worldmodel.prediction import PLANNING_PREDICTOR
+    from socnav_wm.worldmodel.prediction import PLANNING_PREDICTOR
 
     errors = prediction_errors(
         recording, ENV, warmup=3, horizon=6, planning_models=_planning_models(3, False)
@@ -127,7 +127,7 @@ def test_the_untrained_planning_model_is_constant_velocity_on_every_seed(recordi
 def test_a_perturbed_planning_model_is_measured_worse_and_batch_size_does_not_matter(
     recording,
 ) -> None:
-    from pipeline.worldmodel.prediction import PLANNING_PREDICTOR
+    from socnav_wm.worldmodel.prediction import PLANNING_PREDICTOR
 
     models = _planning_models(3, True)
     one = prediction_errors(recording, ENV, warmup=3, horizon=6, planning_models=models,
@@ -145,7 +145,7 @@ def test_a_perturbed_planning_model_is_measured_worse_and_batch_size_does_not_ma
     assert low <= versus["difference"][-1] <= high
     # The goal is kinematics: exact for the learned model too.
     assert max(many["predictors"][PLANNING_PREDICTOR]["goal"]) < 1e-5
-    from pipeline.evaluation.rendering import prediction_section
+    from socnav_wm.evaluation.rendering import prediction_section
 
     section = "\n".join(
         prediction_section(

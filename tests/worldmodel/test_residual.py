@@ -1,4 +1,4 @@
-"""The residual constant-velocity planning model (pipeline/worldmodel/residual.py)."""
+"""The residual constant-velocity planning model (socnav_wm/worldmodel/residual.py)."""
 
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.env.params import EnvParams
-from pipeline.planning.models import ConstantVelocityModel
-from pipeline.planning.mpc import Planner
-from pipeline.planning.params import PlanningParams
-from pipeline.worldmodel import residual
-from pipeline.worldmodel.ego import advance, commands_of, positions, predict_positions
-from pipeline.worldmodel.prediction import random_policy, record
+from socnav_wm.env.params import EnvParams
+from socnav_wm.planning.models import ConstantVelocityModel
+from socnav_wm.planning.mpc import Planner
+from socnav_wm.planning.params import PlanningParams
+from socnav_wm.worldmodel import residual
+from socnav_wm.worldmodel.ego import advance, commands_of, positions, predict_positions
+from socnav_wm.worldmodel.prediction import random_policy, record
 
 ENV = EnvParams()
 
@@ -195,7 +195,7 @@ def test_room_features_place_a_person_in_the_room_from_the_robot_pose() -> None:
 
 
 def test_advance_pose_is_the_simulator_unicycle_for_every_action() -> None:
-    from pipeline.env.core import Simulator
+    from socnav_wm.env.core import Simulator
 
     sim = Simulator(4, ENV)
     sim.reset(seed=3, scenario_ids=np.arange(4))

@@ -9,12 +9,12 @@ import pytest
 import torch
 from matplotlib.figure import Figure
 
-from pipeline.config import VaeParams
-from pipeline.data.shards import RolloutError
-from pipeline.worldmodel import training
-from pipeline.worldmodel.fit import fit_vae
-from pipeline.worldmodel.lstm import LatentLSTM
-from pipeline.worldmodel.training import (
+from socnav_wm.config import VaeParams
+from socnav_wm.data.shards import RolloutError
+from socnav_wm.worldmodel import training
+from socnav_wm.worldmodel.fit import fit_vae
+from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.training import (
     ModelFileError,
     NonFiniteTrainingError,
     encode_observations,
@@ -25,7 +25,7 @@ from pipeline.worldmodel.training import (
     save_vae,
     train_vae,
 )
-from pipeline.worldmodel.vae import VAE, kl_divergence, vae_loss
+from socnav_wm.worldmodel.vae import VAE, kl_divergence, vae_loss
 from tests.data.test_shards import make_episodes, write_dataset
 
 RADIUS_COLUMN = 6  # human 0's radius: constant in real observations

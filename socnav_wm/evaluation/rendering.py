@@ -1,0 +1,735 @@
+"""The report's results turned into text: ``summary.md`` (Markdown tables and prose) and the
+content of ``metrics/report.json``, with the number formats both use (and the claims' evidence).
+
+Nothing here computes a statistic: the numbers come from
+:mod:`~socnav_wm.evaluation.comparisons`, :mod:`~socnav_wm.evaluation.claims` and
+:func:`~socnav_wm.evaluation.evaluate.summarise`; :mod:`~socnav_wm.evaluation.report` writes the
+files.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from socnav_wm.evaluation import paper
+from socnav_wm.evaluation.comparisons import PairedComparison, compare
+from socnav_wm.evaluation.evaluate import BASELINE_SEED, METHODS
+from socnav_wm.metrics import ALL_METRICS, METRIC_DIRECTIONS, METRIC_UNITS, PAPER_METRICS
+
+if TYPE_CHECKING:
+    from socnav_wm.evaluation.claims import ClaimResult
+    from socnav_wm.evaluation.report import MethodEvaluation
+
+__all__ = ["fmt_ci", "fmt_p", "fmt_value", "render_summary", "report_content"]
+
+
+# --------------------------------------------------------------------------------------------
+# Formats
+# --------------------------------------------------------------------------------------------
+
+
+def fmt_value(metric: str, value: float) -> str:
+    """A metric value as the report prints it: rates in %, others to 2–3 significant places."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "–"
+    if math.isinf(value):
+        return "∞" if value > 0 else "−∞"
+    if METRIC_UNITS.get(metric) == "0/1" or metric == paper.ANY_COLLISION:
+        return f"{100.0 * value:.1f}%"
+    if abs(value) >= 100:
+        return f"{value:.0f}"
+    if abs(value) >= 10:
+        return f"{value:.1f}"
+    return f"{value:.3f}" if abs(value) < 1 else f"{value:.2f}"
+
+
+def fmt_ci(metric: str, entry: Mapping[str, float]) -> str:
+    """A ``{"mean", "low", "high"}`` entry as ``mean [low, high]`` (the mean alone without one)."""
+    mean = fmt_value(metric, entry["mean"])
+    if not (math.isfinite(entry["low"]) and math.isfinite(entry["high"])):
+        return mean
+    return f"{mean} [{fmt_value(metric, entry['low'])}, {fmt_value(metric, entry['high'])}]"
+
+
+def fmt_p(p: float) -> str:
+    """A p-value to two significant digits, ``<0.001`` below that, ``–`` when undefined."""
+    if not math.isfinite(p):
+        return "–"
+    return f"{p:.2g}" if p >= 0.001 else "<0.001"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return lines
+
+
+def _direction_mark(metric: str) -> str:
+    return "↑" if METRIC_DIRECTIONS[metric] == "max" else "↓"
+
+
+def _fmt_difference(c: PairedComparison) -> str:
+    def signed(x: float) -> str:
+        text = fmt_value(c.metric, x)
+        return text if text.startswith(("-", "−", "–")) else f"+{text}"
+
+    if not (math.isfinite(c.low) and math.isfinite(c.high)):
+        return signed(c.difference)
+    return f"{signed(c.difference)} [{fmt_value(c.metric, c.low)}, {fmt_value(c.metric, c.high)}]"
+
+
+# --------------------------------------------------------------------------------------------
+# metrics/report.json
+# --------------------------------------------------------------------------------------------
+
+
+def report_content(
+    *,
+    evaluations: Mapping[str, MethodEvaluation],
+    absent: Sequence[str],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]],
+    any_collision: Mapping[str, Mapping[str, float]],
+    comparisons: Sequence[PairedComparison],
+    reference: str,
+    pareto: Mapping[str, Any],
+    claims: Sequence[ClaimResult],
+    training: Mapping[str, Mapping[str, Any]],
+    scenario_seed: int | None,
+    num_scenarios: int,
+    smoothing_window: int,
+    alpha: float,
+) -> dict[str, Any]:
+    """The content of ``metrics/report.json``: means, intervals, p-values, Pareto set, verdicts."""
+    present = list(evaluations)
+    content: dict[str, Any] = {
+        "scenario_seed": scenario_seed,
+        "episodes": num_scenarios,
+        "reference": reference,
+        "alpha": alpha,
+        "methods_present": present,
+        "methods_absent": absent,
+        "methods": {
+            m: {
+                "training_seeds": evaluations[m].training_seeds,
+                "metrics": summaries[m],
+                "any_collision": any_collision[m],
+                **(
+                    {"per_seed": {f"seed-{s}": v for s, v in per_seed[m].items()}}
+                    if m in per_seed
+                    else {}
+                ),
+            }
+            for m in present
+        },
+        "comparisons": {},
+        "pareto": pareto,
+        # Verdicts only: the checks behind them (lists of dicts, which `dvc metrics show`
+        # cannot tabulate) go to reports/claims.json.
+        "claims": {
+            r.claim.claim_id: {"verdict": r.verdict, "statement": r.claim.statement} for r in claims
+        },
+        "training": {
+            v: {
+                "seeds": t["seeds"],
+                "plateau": {f"seed-{s}": x for s, x in t["plateau"].items()},
+                "episodes_to_solve": {f"seed-{s}": x for s, x in t["episodes_to_solve"].items()},
+                "paper_plateau": paper.TRAINING_TARGETS[v].plateau
+                if v in paper.TRAINING_TARGETS
+                else None,
+            }
+            for v, t in training.items()
+        },
+        "smoothing_window": smoothing_window,
+    }
+    for c in comparisons:
+        entry = {k: v for k, v in asdict(c).items() if k not in ("method", "other", "metric")}
+        entry["verdict"] = c.verdict(alpha)
+        content["comparisons"].setdefault(c.method, {})[c.metric] = entry
+    return content
+
+
+# --------------------------------------------------------------------------------------------
+# summary.md
+# --------------------------------------------------------------------------------------------
+
+
+def render_summary(
+    *,
+    evaluations: Mapping[str, MethodEvaluation],
+    absent: Sequence[str],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]],
+    any_collision: Mapping[str, Mapping[str, float]],
+    comparisons: Sequence[PairedComparison],
+    reference: str,
+    pareto: Mapping[str, Any],
+    claims: Sequence[ClaimResult],
+    training: Mapping[str, Mapping[str, Any]],
+    figure_paths: Sequence[Path],
+    figure_notes: Sequence[str],
+    out_dir: Path,
+    scenario_seed: int | None,
+    num_scenarios: int,
+    smoothing_window: int,
+    alpha: float,
+    prediction: Mapping[str, Any] | None = None,
+    planning_horizons: Mapping[str, int] | None = None,
+) -> str:
+    """The text of ``summary.md``: tables, comparisons, Pareto set, the paper, claims, the world
+    model's prediction errors (``prediction``, from ``socnav-wm predict``), the planners against
+    their ceiling (explained by the prediction errors at each planner's horizon,
+    ``planning_horizons``), figures."""
+    lines: list[str] = ["# socnav-wm: evaluation report", ""]
+    present = list(evaluations)
+    seeds_text = ", ".join(
+        f"{m} ({len(e.training_seeds)} seed{'s' if len(e.training_seeds) > 1 else ''})"
+        if e.is_agent
+        else m
+        for m, e in evaluations.items()
+    )
+    lines += [
+        f"Test scenarios: {num_scenarios} (scenario seed {scenario_seed}), the same for every "
+        "method. Agents act greedily; every training seed is evaluated. Baselines are "
+        f"deterministic (one run, `training_seed = {BASELINE_SEED}`).",
+        "",
+        f"- Evaluated: {seeds_text or 'none'}.",
+        f"- **Not evaluated: {', '.join(absent)}.**" if absent else "- Not evaluated: none.",
+        "",
+    ]
+    if not present:
+        lines += ["No evaluation file was found: nothing to report.", ""]
+
+    # -- the table -----------------------------------------------------------------------------
+    if present:
+        lines += [
+            "## Test metrics",
+            "",
+            "Mean [95% interval] over scenarios × training seeds (two-way bootstrap: seeds and "
+            "scenarios resampled independently); rates in %. ↑ higher is better, ↓ lower is "
+            "better. Definitions: `socnav_wm/metrics.py` (the paper's intent, world frame).",
+            "",
+        ]
+        header = ["method", "n"] + [f"{m} {_direction_mark(m)}" for m in PAPER_METRICS]
+        rows = [
+            [m, str(summaries[m]["success"]["n"])]
+            + [fmt_ci(k, summaries[m][k]) for k in PAPER_METRICS]
+            for m in present
+        ]
+        lines += _table(header, rows) + [""]
+        extra = [k for k in ALL_METRICS if k not in PAPER_METRICS]
+        lines += ["Further metrics:", ""]
+        header = ["method"] + [f"{m} {_direction_mark(m)}" for m in extra]
+        rows = [[m] + [fmt_ci(k, summaries[m][k]) for k in extra] for m in present]
+        lines += _table(header, rows) + [""]
+        lines += [
+            "`time_to_reach_goal` is over successful episodes only; "
+            "`personal_space_compliance_code` is the original code's definition (centre "
+            "distance ≥ 2.02 m).",
+            "",
+        ]
+        if per_seed:
+            lines += [
+                "### Per training seed",
+                "",
+                "With a handful of seeds the interval's seed component is estimated poorly: "
+                "here is the spread itself.",
+                "",
+            ]
+            header = ["method", "seed"] + list(PAPER_METRICS)
+            rows = [
+                [m, str(s)] + [fmt_value(k, v[k]) for k in PAPER_METRICS]
+                for m, seeds in per_seed.items()
+                for s, v in seeds.items()
+            ]
+            lines += _table(header, rows) + [""]
+
+    # -- paired comparisons --------------------------------------------------------------------
+    lines += ["## Paired comparisons with " + f"`{reference}`", ""]
+    if reference not in evaluations:
+        lines += [f"`{reference}` was not evaluated: no paired comparisons.", ""]
+    elif not comparisons:
+        lines += ["No other method was evaluated.", ""]
+    else:
+        lines += [
+            "Same scenarios, paired scenario by scenario (same seeds: seed s, scenario i "
+            "against seed s, scenario i; agent vs baseline: every seed's run against the "
+            "baseline's). The scenario is the independent unit: McNemar (clustered McNemar, "
+            "Durkalski et al. 2003, when a scenario holds several pairs) for 0/1 metrics, "
+            "Wilcoxon signed-rank on per-scenario means otherwise. Difference = method − "
+            f"reference with a 95% interval; Holm over all {len(comparisons)} comparisons; "
+            f"verdict at α = {alpha}.",
+            "",
+        ]
+        header = [
+            "method",
+            "metric",
+            "test",
+            "pairs (scenarios)",
+            "difference [95%]",
+            "effect",
+            "p",
+            "Holm p",
+            "verdict",
+        ]
+        rows = []
+        for c in comparisons:
+            if c.num_pairs == 0:
+                rows.append([c.method, c.metric, "–", "0", "–", "–", "–", "–", "no pairs"])
+                continue
+            effect = (
+                f"{c.effect_size:+.3f} (r)"
+                if c.effect_name.startswith("rank")
+                else f"{100 * c.effect_size:+.1f} pp"
+            )
+            rows.append(
+                [
+                    c.method,
+                    c.metric,
+                    c.test,
+                    f"{c.num_pairs} ({c.num_scenarios})",
+                    _fmt_difference(c),
+                    effect,
+                    fmt_p(c.p_value),
+                    fmt_p(c.p_holm),
+                    c.verdict(alpha),
+                ]
+            )
+        lines += _table(header, rows) + [""]
+
+    # -- Pareto --------------------------------------------------------------------------------
+    lines += ["## Pareto analysis", ""]
+    if present:
+        metrics_text = ", ".join(f"{m} {_direction_mark(m)}" for m in pareto["metrics"])
+        lines += [
+            f"Over the means of: {metrics_text} (directions declared in "
+            "`socnav_wm.metrics.METRIC_DIRECTIONS`). No statistical test: a method is dominated "
+            "when another is at least as good on every metric and better on one.",
+            "",
+            f"- Non-dominated: **{', '.join(pareto['front'])}**",
+        ]
+        for method, winners in pareto["dominated_by"].items():
+            lines.append(f"- {method} is dominated by {', '.join(winners)}")
+        if pareto["dropped_metrics"]:
+            lines.append(f"- Left out (undefined mean): {', '.join(pareto['dropped_metrics'])}")
+        lines.append("")
+    else:
+        lines += ["No method evaluated.", ""]
+
+    # -- the paper -----------------------------------------------------------------------------
+    lines += _paper_section(evaluations, summaries, any_collision, training, smoothing_window)
+    lines += ["## The paper's claims, checked", ""]
+    lines += [
+        'Each claim is split into checks ("A beats B on a metric"), Holm-adjusted within the '
+        f"claim (α = {alpha}). A claim is reproduced when all its testable checks are "
+        "significant in the paper's direction, not reproduced when one is significant the "
+        "other way; _inconclusive_ means no significant difference either way. Training "
+        "claims compare per-seed values (Mann–Whitney): with fewer than 4–5 seeds a side "
+        "they cannot be decided. Verdicts are computed from this run's data. The studies "
+        "(`make study`, hours of trainings outside `dvc repro`) check the training claims "
+        "with five seeds and the paper's look-ahead claim; `reports/studies/claims.md` gives "
+        "every claim with the strongest evidence present (stage `study_claims`).",
+        "",
+    ]
+    for result in claims:
+        note = f" ({result.note})" if result.note else ""
+        lines.append(
+            f"- **{result.verdict.upper()}**{note} — {result.claim.statement} "
+            f"[{result.claim.source}]"
+        )
+        for check in result.checks:
+            lines.append(
+                f"  - {check.status}: {check.subject} vs {check.other}, "
+                f"{check.metric}: {check.evidence}"
+            )
+    lines += ["", f"> {paper.BASELINE_NOTE}", ""]
+    if prediction is not None:
+        lines += prediction_section(prediction)
+    lines += planning_section(evaluations, summaries, prediction, planning_horizons or {})
+
+    # -- figures -------------------------------------------------------------------------------
+    lines += ["## Figures", ""]
+    captions = {
+        "training_curves.png": "Training return per episode, trailing rolling mean of "
+        f"{smoothing_window} episodes; line = mean over seeds, band = min–max over seeds "
+        "(the paper's Fig. 6).",
+        "histograms.png": "Distribution of each metric over test episodes, methods side by "
+        "side; fraction of each method's episodes (the paper's Figs. 7–8).",
+        "means.png": "Means and 95% intervals of the table.",
+        "scenarios.gif": "The same test scenarios played by every method (agents: lowest "
+        "training seed), rebuilt from the recorded trajectories.",
+    }
+    for path in figure_paths:
+        relative = path.relative_to(out_dir).as_posix() if path.is_relative_to(out_dir) else path
+        lines += [f"![{path.name}]({relative})", "", captions.get(path.name, ""), ""]
+    for note in figure_notes:
+        lines.append(f"- {note}")
+    if figure_notes:
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _paper_section(
+    evaluations: Mapping[str, MethodEvaluation],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    any_collision: Mapping[str, Mapping[str, float]],
+    training: Mapping[str, Mapping[str, Any]],
+    smoothing_window: int,
+) -> list[str]:
+    lines = [
+        "## Side by side with the paper",
+        "",
+        "Paper values read from the UKCI 2023 figures (paper_spec §7): rates ±0.6 pp (±3 "
+        'episodes of 500), means ±half a histogram bin. "comparable" says whether the '
+        "paper's scripts measured the same thing as ours.",
+        "",
+    ]
+    header = ["method", "metric", "paper", "this run [95%]", "comparable", "note"]
+    rows = []
+    for method in METHODS:
+        if method not in evaluations or method not in paper.TEST_TARGETS:
+            continue
+        for label, target in paper.TEST_TARGETS[method].items():
+            ours = (
+                any_collision[method]
+                if target.our_metric == paper.ANY_COLLISION
+                else summaries[method][target.our_metric]
+            )
+            uncertainty = (
+                f" ± {fmt_value(target.our_metric, target.uncertainty)}"
+                if target.uncertainty
+                else ""
+            )
+            rows.append(
+                [
+                    f"{method} ({paper.PAPER_METHOD_NAMES[method]})",
+                    label,
+                    fmt_value(target.our_metric, target.value) + uncertainty,
+                    fmt_ci(target.our_metric, ours),
+                    "yes" if target.comparable else "no",
+                    target.note,
+                ]
+            )
+    if rows:
+        lines += _table(header, rows) + [""]
+    else:
+        lines += ["No evaluated method to compare.", ""]
+    if training:
+        lines += [
+            "Training (final smoothed return = mean return of the last "
+            f"{smoothing_window} episodes; the paper trained up to 180k episodes, its window is "
+            "unknown):",
+            "",
+        ]
+        header = ["variant", "paper plateau", "this run: mean [min, max] over seeds", "seeds",
+                  "episodes", "episodes to solve"]  # fmt: skip
+        rows = []
+        for variant, entry in training.items():
+            plateaus = [v for v in entry["plateau"].values() if v is not None]
+            solved = ["never" if v is None else str(v) for v in entry["episodes_to_solve"].values()]
+            target = paper.TRAINING_TARGETS.get(variant)
+            rows.append(
+                [
+                    variant,
+                    f"{target.plateau:.2f}" if target else "–",
+                    f"{np.mean(plateaus):.3f} [{min(plateaus):.3f}, {max(plateaus):.3f}]"
+                    if plateaus
+                    else "–",
+                    str(len(entry["seeds"])),
+                    ", ".join(str(e) for e in entry["episodes"].values()),
+                    ", ".join(solved),
+                ]
+            )
+        lines += _table(header, rows) + [""]
+    return lines
+
+
+RESULTS_METRICS = (
+    "success",
+    "human_collision",
+    "discomfort",
+    "simulation_time",
+    "distance_travelled",
+    "personal_space_compliance",
+)
+"""The columns of the short results table (README); ``summary.md`` has every metric."""
+
+
+PREDICTION_KS = (1, 4, 8, 12, 16)
+"""The steps ahead shown in the report's prediction table."""
+
+PREDICTOR_ORDER = ("copy-last", "static", "constant-velocity", "vae-lstm", "planning-model")
+POLICY_ORDER = ("random", "agent")
+"""Columns and tables of the prediction section (the JSON file's keys are sorted)."""
+
+
+def _ordered(names: Sequence[str], order: Sequence[str]) -> list[str]:
+    return [n for n in order if n in names] + sorted(n for n in names if n not in order)
+
+
+def prediction_section(prediction: Mapping[str, Any]) -> list[str]:
+    """The world model's k-step errors in metres beside the no-learning predictors (the
+    content of ``metrics/prediction.json``), one table per policy."""
+    settings = prediction["settings"]
+    lines = [
+        "## The world model's predictions, in metres",
+        "",
+        f"Open-loop rollouts of the true actions from real states, after {settings['warmup']} "
+        f"real steps, on {settings['episodes']} scenarios of seed {settings['scenario_seed']}; "
+        "mean Euclidean error in the robot frame, over the episodes still running at k "
+        "(`socnav-wm predict`, `metrics/prediction.json`, figure `prediction.png`). The paper "
+        "never measured its world model this way. `static` and `constant-velocity` apply the "
+        "robot's own motion exactly (their goal error is 0).",
+        "",
+    ]
+    for policy in _ordered(list(prediction["policies"]), POLICY_ORDER):
+        errors = prediction["policies"][policy]
+        names = _ordered(list(errors["predictors"]), PREDICTOR_ORDER)
+        model = "vae-lstm" if "vae-lstm" in names else None
+        header = ["k", "n", *(f"{n}: humans" for n in names)]
+        if model:
+            header.append(f"{model}: goal")
+        rows = []
+        if model and "k0" in errors["predictors"][model]:
+            k0 = errors["predictors"][model]["k0"]
+            row = ["0 (VAE alone)", ""] + [
+                f"{k0['humans']:.3f}" if n == model else "" for n in names
+            ]
+            rows.append([*row, f"{k0['goal']:.3f}"])
+        for k in PREDICTION_KS:
+            if k not in errors["k"]:
+                continue
+            i = errors["k"].index(k)
+            row = [str(k), str(errors["n"][i])]
+            row += [f"{errors['predictors'][n]['humans'][i]:.3f}" for n in names]
+            if model:
+                row.append(f"{errors['predictors'][model]['goal'][i]:.3f}")
+            rows.append(row)
+        agent = f" ({settings['agent']}, ε = {settings['epsilon']})" if policy == "agent" else ""
+        lines += [f"**{policy} policy{agent}**", ""] + _table(header, rows) + [""]
+        if model and "constant-velocity" in names:
+            ours = errors["predictors"][model]["humans"]
+            cv = errors["predictors"]["constant-velocity"]["humans"]
+            static = errors["predictors"]["static"]["humans"]
+            below_cv = [k for k, a, b in zip(errors["k"], ours, cv, strict=True) if a < b]
+            below_static = [k for k, a, b in zip(errors["k"], ours, static, strict=True) if a < b]
+            lines += [
+                f"- {model} predicts the humans better than constant velocity at "
+                f"{_ks(below_cv)}, better than static humans at {_ks(below_static)}.",
+                "",
+            ]
+        change = errors.get("goal_change")
+        if change:
+            i = errors["k"].index(max(errors["k"]))
+            parts = [
+                f"{name} {values['kept'][i]:.3f} m for those who kept their goal, "
+                f"{values['changed'][i]:.3f} m for the others"
+                for name, values in change["predictors"].items()
+                if name in ("constant-velocity", "planning-model", "vae-lstm")
+            ]
+            lines += [
+                f"- Humans draw a new goal when they reach theirs, and goals are not observed: "
+                f"{change['changed_share'][i]:.0%} of the humans did within k = "
+                f"{errors['k'][i]} steps. At that k: " + "; ".join(parts) + ".",
+                "",
+            ]
+        versus = errors.get("planning_model")
+        if versus:
+            verdicts = dict(zip(errors["k"], versus["verdict"], strict=True))
+            by = {v: [k for k, w in verdicts.items() if w == v] for v in ("better", "worse")}
+            i = errors["k"].index(max(errors["k"]))
+            low, high = versus["difference_ci"][i]
+            lines += [
+                f"- The planning model ({versus['seeds']} training seeds) against constant "
+                f"velocity, humans, 95% interval over seeds: significantly better at "
+                f"{_ks(by['better'])}, significantly worse at {_ks(by['worse'])}; at "
+                f"k = {errors['k'][i]} the difference is {versus['difference'][i]:+.4f} m "
+                f"[{low:+.4f}, {high:+.4f}].",
+                "",
+            ]
+    return lines
+
+
+CEILING = "oracle-mpc"
+MODEL_PLANNERS = {
+    "cv-mpc": "constant-velocity",
+    "wm-mpc": "planning-model",
+    "vae-lstm-mpc": "vae-lstm",
+}
+"""The planners that plan on a model of the observation, and the predictor of ``socnav-wm
+predict`` that is their model."""
+
+
+def _paired(a: MethodEvaluation, b: MethodEvaluation, metric: str) -> str:
+    """``a`` − ``b`` on a rate ``metric``, paired scenario by scenario: "+x pp [low, high], p"."""
+    c = compare(a.episodes, b.episodes, metric)
+    return (
+        f"{c.difference * 100:+.1f} pp [{c.low * 100:+.1f}, {c.high * 100:+.1f}], "
+        f"p = {fmt_p(c.p_value)}"
+    )
+
+
+def planning_section(
+    evaluations: Mapping[str, MethodEvaluation],
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    prediction: Mapping[str, Any] | None,
+    horizons: Mapping[str, int],
+) -> list[str]:
+    """The planners against ``oracle-mpc`` (same planner, the simulator as its model): how far
+    each is from that ceiling, paired scenario by scenario, and the k-step errors of its model
+    at its horizon (``horizons``: planner → steps; default the longest predicted) that explain
+    the gap. Empty without the ceiling."""
+    planners = [m for m in MODEL_PLANNERS if m in evaluations]
+    if CEILING not in evaluations or not planners:
+        return []
+    lines = [
+        "## Planning: the ceiling, and what keeps the models from it",
+        "",
+        f"`{CEILING}` plans with the same candidates and cost on the simulator itself (with "
+        "random draws of its own): what the four actions and this planner allow on these "
+        "scenarios. Each planner below plans on a model of the observation; its difference from "
+        "the ceiling is paired scenario by scenario (95% interval, p of the paired test).",
+        "",
+    ]
+    rows = []
+    for method in [CEILING, *planners]:
+        row = [method]
+        for metric in ("success", "human_collision"):
+            cell = fmt_ci(metric, summaries[method][metric])
+            if method != CEILING:
+                cell += "; " + _paired(evaluations[method], evaluations[CEILING], metric)
+            row.append(cell)
+        rows.append(row)
+    header = ["planner", "success; against the ceiling", "human collisions; against the ceiling"]
+    lines += _table(header, rows) + [""]
+    robots = [robot for robot in ("orca", "sfm") if robot in evaluations]
+    if robots:
+        lines += [
+            "Against the ORCA and SFM robots, which read the world-frame state (planner − "
+            "robot, paired scenario by scenario; 95% interval, p of the paired test):",
+            "",
+        ]
+        rows = []
+        for method in [CEILING, *planners]:
+            rows.append(
+                [method]
+                + [
+                    _paired(evaluations[method], evaluations[robot], metric)
+                    for robot in robots
+                    for metric in ("success", "human_collision")
+                ]
+            )
+        header = ["planner"] + [
+            f"{label} − {robot}" for robot in robots for label in ("success", "human collisions")
+        ]
+        lines += _table(header, rows) + [""]
+    collided = summaries[CEILING]["human_collision"]["mean"]
+    lines.append(
+        f"- `{CEILING}` itself collides with a human in {collided:.1%} of the episodes: "
+        "knowing the humans' rules, though not their future random draws, the planner does "
+        "not avoid those."
+    )
+    if prediction is None or "random" not in prediction["policies"]:
+        return lines
+    errors = prediction["policies"]["random"]
+    longest = max(errors["k"])
+
+    def step(planner: str) -> int | None:
+        k = min(horizons.get(planner, longest), longest)
+        return errors["k"].index(k) if k in errors["k"] else None
+
+    parts = []
+    for planner in planners:
+        name, i = MODEL_PLANNERS[planner], step(planner)
+        if i is not None and name in errors["predictors"]:
+            error = errors["predictors"][name]["humans"][i]
+            parts.append(f"`{planner}` ({name}) {error:.3f} m at k = {errors['k'][i]}")
+    if parts:
+        lines.append(
+            "- The humans' mean position error of each planner's model at its horizon (random "
+            "policy, as in the prediction section): " + "; ".join(parts) + "."
+        )
+    change = errors.get("goal_change")
+    cv = change["predictors"].get("constant-velocity") if change else None
+    i = step("cv-mpc")
+    if cv and i is not None:
+        share = change["changed_share"][i]
+        overall = errors["predictors"]["constant-velocity"]["humans"][i]
+        from_changes = share * cv["changed"][i] / overall if overall > 0 else math.nan
+        line = (
+            f"- At k = {errors['k'][i]}, {from_changes:.0%} of constant velocity's error comes "
+            f"from the {share:.0%} of the humans who drew a new goal within those steps "
+            f"({cv['changed'][i]:.3f} m; {cv['kept'][i]:.3f} m for those who kept theirs): "
+            "goals are not in the observation, so no model of it foresees when a person turns "
+            "or where to."
+        )
+        learned = change["predictors"].get("planning-model")
+        if learned:
+            line += (
+                f" The planning model, which also knows where the room ends, has "
+                f"{learned['changed'][i]:.3f} m for those who drew a new goal and "
+                f"{learned['kept'][i]:.3f} m for the others: it trades a little on the people "
+                "who walk on for more on those who turn."
+            )
+        lines.append(line)
+    if "cv-mpc" in summaries:
+        gap = summaries[CEILING]["success"]["mean"] - summaries["cv-mpc"]["success"]["mean"]
+        lines.append(
+            f"- The ceiling succeeds {abs(gap) * 100:.1f} points {'more' if gap >= 0 else 'less'}"
+            " often than `cv-mpc` (means): with this planner on these scenarios, a better model "
+            "of the humans has no more than that to win."
+        )
+    if "cv-mpc" in evaluations and "wm-mpc" in evaluations:
+        parts = [
+            f"{label} " + _paired(evaluations["wm-mpc"], evaluations["cv-mpc"], metric)
+            for metric, label in (("success", "success"), ("human_collision", "human collisions"))
+        ]
+        lines.append(
+            "- The learned model against constant velocity, the same planner otherwise "
+            "(`wm-mpc` − `cv-mpc`, paired): " + "; ".join(parts) + "."
+        )
+    lines.append("")
+    return lines
+
+
+def _ks(ks: Sequence[int]) -> str:
+    return "no k" if not ks else "k = " + ", ".join(map(str, ks))
+
+
+def results_table(
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
+    present: Sequence[str],
+    *,
+    num_scenarios: int,
+    scenario_seed: int | None,
+) -> str:
+    """The results of every evaluated method as one markdown table, with the line that says
+    what it is (the block :func:`replace_marked_block` writes into the README)."""
+    lines = [
+        f"Every method on the same {num_scenarios} test scenarios (scenario seed "
+        f"{scenario_seed}); agents: every training seed, greedy. Mean [95% interval]; "
+        "↑ higher is better, ↓ lower. Written by `socnav-wm report` "
+        "(all metrics and the paired tests: `reports/summary.md`).",
+        "",
+    ]
+    header = ["method"] + [f"{m} {_direction_mark(m)}" for m in RESULTS_METRICS]
+    rows = [[f"`{m}`"] + [fmt_ci(k, summaries[m][k]) for k in RESULTS_METRICS] for m in present]
+    return "\n".join(lines + _table(header, rows))
+
+
+def replace_marked_block(text: str, name: str, body: str) -> str:
+    """``text`` with what lies between ``<!-- socnav-wm:name -->`` and
+    ``<!-- /socnav-wm:name -->`` replaced by ``body``. Raises ValueError if the markers are
+    missing (a document that should carry the block must have them)."""
+    start, end = f"<!-- socnav-wm:{name} -->", f"<!-- /socnav-wm:{name} -->"
+    before, found, rest = text.partition(start)
+    _, found_end, after = rest.partition(end)
+    if not found or not found_end:
+        raise ValueError(f"no block {start} … {end} to fill")
+    return f"{before}{start}\n{body.rstrip()}\n{end}{after}"

@@ -1,0 +1,193 @@
+"""Receding-horizon planning over the paper's four actions (stop, forward, left, right).
+
+At every step, for every episode at once:
+
+1. the candidates are every ``prefix_length``-action prefix (``4**prefix_length``), each
+   followed by each continuation (``goal``: turn towards the predicted goal when it is more
+   than half a turn step off the heading, else advance; ``stop``; ``forward``) up to
+   ``horizon`` steps;
+2. the model imagines all of them in one batch (``episodes × candidates`` futures), one step
+   at a time;
+3. each future is scored on its predicted goal and humans, step ``k`` weighted ``γᵏ``:
+   progress towards the goal (m) × ``progress_weight``, − ``discomfort_cost`` when a human is
+   nearer than ``discomfort_distance`` surface to surface, − ``collision_cost`` (and the future
+   ends) at a contact, + ``goal_reward`` (and the future ends) at the goal;
+4. the first action of the best candidate is executed (ties: the first in the table), and the
+   plan is made afresh at the next step.
+
+Walls are not in the observation, so a model that predicts from observations does not see them.
+With ``walls`` (the default) the planner itself knows the room and the robot's pose in it, as a
+robot with a map and localisation does: it moves the imagined robot by the unicycle update of
+each candidate action, and a step that brings it within its radius of a wall is a collision
+(the simulator's test). The models still predict only the goal and the humans.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from socnav_wm.env.core import NUM_ACTIONS
+from socnav_wm.env.params import EnvParams
+from socnav_wm.planning.models import PlanningModel
+from socnav_wm.planning.params import PlanningParams
+from socnav_wm.worldmodel.ego import advance_pose, commands_of
+
+STOP, FORWARD, LEFT, RIGHT = range(NUM_ACTIONS)
+
+
+def prefixes(length: int) -> np.ndarray:
+    """Every action sequence of ``length`` steps, (4**length, length) int64, in lexicographic
+    order (so the first is all ``stop``)."""
+    return np.array(list(itertools.product(range(NUM_ACTIONS), repeat=length)), dtype=np.int64)
+
+
+def towards_goal(goal: np.ndarray, env_params: EnvParams) -> np.ndarray:
+    """The ``goal`` continuation's action (B,) for robot-frame goals (B, 2): rotate towards the
+    goal while its bearing exceeds half a turn step, else advance."""
+    bearing = np.arctan2(goal[:, 1], goal[:, 0])
+    half_turn = 0.5 * env_params.robot_max_rotation * env_params.dt
+    return np.where(bearing > half_turn, LEFT, np.where(bearing < -half_turn, RIGHT, FORWARD))
+
+
+def candidate_actions(
+    prefix_table: np.ndarray,
+    continuations: tuple[str, ...],
+    k: int,
+    goal: np.ndarray,
+    env_params: EnvParams,
+) -> np.ndarray:
+    """Step ``k``'s action of every future (B,), futures in candidate order repeated per
+    episode: the prefix's while ``k`` is within it, then the continuation's (``goal`` from the
+    futures' robot-frame goals (B, 2))."""
+    conts = len(continuations)
+    batch = len(goal)
+    candidates = len(prefix_table) * conts
+    rows_of = np.arange(batch) % candidates
+    if k < prefix_table.shape[1]:
+        return prefix_table[rows_of // conts, k]
+    continuation_of = rows_of % conts
+    actions = np.empty(batch, dtype=np.int64)
+    for c, name in enumerate(continuations):
+        rows = continuation_of == c
+        if name == "goal":
+            actions[rows] = towards_goal(goal[rows], env_params)
+        else:
+            actions[rows] = {"stop": STOP, "forward": FORWARD}[name]
+    return actions
+
+
+def step_gain(
+    params: PlanningParams,
+    env_params: EnvParams,
+    progress: np.ndarray,
+    centre: np.ndarray,
+    collided: np.ndarray,
+    reached: np.ndarray,
+) -> np.ndarray:
+    """One predicted step's term of the cost (the module docstring's step 3), undiscounted:
+    ``progress`` (m towards the goal), ``centre`` (distance to the nearest human's centre, m),
+    ``collided`` and ``reached`` (bool), all (B,)."""
+    p, e = params, env_params
+    uncomfortable = centre - e.robot_radius - e.human_radius < e.discomfort_distance
+    return (
+        p.progress_weight * progress
+        - p.discomfort_cost * uncomfortable
+        - p.collision_cost * collided
+        + p.goal_reward * reached
+    )
+
+
+class Planner:
+    """The planner of the module docstring, with ``model`` as its predictor.
+
+    Args:
+        model: a :class:`~socnav_wm.planning.models.PlanningModel`, following the episodes.
+        params: the ``planning`` section.
+        env_params: the scenarios' parameters (radii, goal and discomfort distances, turn step).
+    """
+
+    def __init__(self, model: PlanningModel, params: PlanningParams, env_params: EnvParams):
+        self.model, self.params, self.env_params = model, params, env_params
+        self.prefixes = prefixes(params.prefix_length)
+        self.num_candidates = len(self.prefixes) * len(params.continuations)
+
+    def scores(self, goal_now: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+        """(N, candidates) predicted returns from the model's present, where the goal is at
+        ``goal_now`` (N, 2) in the robot frame; candidate ``p · len(continuations) + c`` is
+        prefix ``p`` followed by continuation ``c``. With ``pose`` (N, 3: the robot's x, y, θ
+        in the room), touching a wall is a collision."""
+        p, e = self.params, self.env_params
+        num_episodes = len(goal_now)
+        s = self.num_candidates
+        rollout = self.model.rollout(s, pose)
+        batch = num_episodes * s
+        score = np.zeros(batch)
+        alive = np.ones(batch, dtype=bool)
+        goal = np.repeat(np.asarray(goal_now, dtype=np.float64), s, axis=0)
+        goal_distance = np.hypot(goal[:, 0], goal[:, 1])
+        contact = e.robot_radius + e.human_radius + p.safety_margin
+        wall_limit = e.wall_half_size - e.robot_radius - p.safety_margin
+        robot = None if pose is None else np.repeat(np.asarray(pose, dtype=np.float64), s, axis=0)
+        for k in range(p.horizon):
+            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e)
+            predicted = rollout.step(actions)
+            goal = predicted[:, 0]
+            new_goal_distance = np.hypot(goal[:, 0], goal[:, 1])
+            centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
+            collided = centre < contact
+            if robot is not None:
+                robot = advance_pose(robot, *commands_of(actions, e), e.dt)
+                collided |= np.abs(robot[:, :2]).max(axis=1) >= wall_limit
+            reached = ~collided & (new_goal_distance < e.success_distance)
+            score += np.where(
+                alive,
+                p.discount**k
+                * step_gain(p, e, goal_distance - new_goal_distance, centre, collided, reached),
+                0.0,
+            )
+            alive &= ~(collided | reached)
+            goal_distance = new_goal_distance
+        return score.reshape(num_episodes, s)
+
+    def act(self, obs: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+        """The first action (N,) of each episode's best candidate, from the model's present
+        (whose observation is ``obs``; ``pose`` (N, 3): the robot's in the room, for the
+        walls)."""
+        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2], pose)
+        best = scores.argmax(axis=1)  # the first of equal scores
+        return self.prefixes[best // len(self.params.continuations), 0]
+
+    @property
+    def reads_simulator(self) -> bool:
+        """Whether :meth:`policy` takes the simulator (for the robot's pose: ``walls``) rather
+        than the observations."""
+        return self.params.walls
+
+    def policy(self) -> Callable[[Any], np.ndarray]:
+        """A policy for episodes that start together (what
+        :func:`socnav_wm.env.rollout.run_episodes` calls): ``obs (N, obs_dim) → actions (N,)``,
+        or with ``walls`` ``simulator → actions``, which reads the observations and the robot's
+        pose (and nothing else of the simulator's state). Its first call starts the model on
+        the episodes, every later call is their next step."""
+        last: list[np.ndarray] = []
+
+        def act(obs: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+            if last:
+                self.model.observe(obs, last[0])
+            else:
+                self.model.reset(obs)
+            actions = self.act(obs, pose)
+            last[:] = [actions]
+            return actions
+
+        if not self.params.walls:
+            return act
+
+        def localised(sim: Any) -> np.ndarray:
+            return act(sim.observation, sim.state.robot_pose())
+
+        return localised

@@ -1,0 +1,103 @@
+"""The planners' parameters (``params.yaml``'s ``planning`` section): a light module, no torch.
+
+:mod:`socnav_wm.planning.mpc` explains the planner; each field below says what it changes.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, ClassVar, Literal, Self
+
+from pydantic import AfterValidator, BeforeValidator, Field, model_validator
+
+from socnav_wm.env.params import Section
+
+PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc")
+"""The planning methods: receding-horizon control over the paper's four actions, each with its
+model of the goal and the humans: ``cv-mpc`` constant velocity (no learning), ``wm-mpc`` the
+planning world model (``train_planning_model``'s seed 0), ``vae-lstm-mpc`` the paper's VAE +
+LSTM, ``oracle-mpc`` the simulator itself (the ceiling of the four actions)."""
+
+Continuation = Literal["goal", "stop", "forward"]
+CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")
+
+
+def _as_tuple(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+def _distinct(value: tuple[str, ...]) -> tuple[str, ...]:
+    if not value:
+        raise ValueError("expected at least one continuation")
+    if len(set(value)) != len(value):
+        raise ValueError(f"a continuation is listed twice in {list(value)!r}")
+    return value
+
+
+Continuations = Annotated[
+    tuple[Continuation, ...], BeforeValidator(_as_tuple), AfterValidator(_distinct)
+]
+
+
+def _finite(default: float, **bounds: float) -> Any:
+    return Field(default, allow_inf_nan=False, **bounds)
+
+
+class PlanningParams(Section):
+    """Receding-horizon planning over the paper's four actions (socnav_wm/planning/mpc.py).
+
+    At every step the planner scores every candidate, a ``prefix_length``-action prefix (all
+    ``4**prefix_length`` of them) followed by one of the ``continuations`` up to ``horizon``
+    steps, on the model's predicted goal and humans, and executes the first action of the best.
+    """
+
+    SECTION: ClassVar[str] = "planning"
+
+    horizon: int = Field(12, gt=0)
+    """Steps each candidate is predicted ahead."""
+    prefix_length: int = Field(3, gt=0, le=5)
+    """Length of the exhaustive prefix (4**prefix_length candidates; at most 5, 1,024)."""
+    continuations: Continuations = CONTINUATIONS
+    """What follows a prefix: ``goal`` (turn towards the predicted goal, then advance), ``stop``,
+    ``forward``."""
+    discount: float = _finite(0.95, gt=0, le=1)
+    """Weight γᵏ of step k's terms: the same outcome sooner scores higher."""
+    goal_reward: float = _finite(10.0, ge=0)
+    """Added once when the predicted robot reaches the goal (the candidate's end)."""
+    collision_cost: float = _finite(10.0, ge=0)
+    """Subtracted once when a predicted human touches the robot (the candidate's end)."""
+    discomfort_cost: float = _finite(0.1, ge=0)
+    """Subtracted per step where a predicted human is nearer than the scenario's
+    ``discomfort_distance`` (0.9999 m, the paper's) surface to surface."""
+    progress_weight: float = _finite(1.0, ge=0)
+    """Weight of each step's progress towards the goal (metres)."""
+    safety_margin: float = _finite(0.0, ge=0)
+    """Added to the radii when testing a predicted contact (m)."""
+    walls: bool = True
+    """The planner knows the room and the robot's pose in it (a map and localisation, which
+    the ORCA and SFM robots and ``oracle-mpc`` have too): a candidate whose imagined robot
+    touches a wall collides there. False: it sees only what the observation shows (no walls)."""
+    oracle_seed: int = Field(4_000_037, ge=0)
+    """``oracle-mpc``: the seed of its clones' random draws (SFM noticing the robot, the humans'
+    new goals), not the episode's: it knows the humans' rules, not their future coin flips."""
+    oracle_clairvoyant: bool = False
+    """``oracle-mpc``: the clones reuse the episode's own draws instead (a clairvoyant ceiling)."""
+    per_method: dict[str, dict[str, Any]] = Field(
+        default_factory=lambda: {"vae-lstm-mpc": {"prefix_length": 2, "horizon": 6}}
+    )
+    """Per-planner overrides of the fields above. ``vae-lstm-mpc`` runs a 256-unit LSTM and the
+    VAE's decoder for every candidate and step, 40–75 ms of one core per decision at the shared
+    64 candidates × 12 steps; its 16 × 6 keep a 500-scenario evaluation within minutes."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Self:
+        self._check_overrides("per_method", PLANNER_NAMES, "planner")
+        return self
+
+    def resolved(self, method: str) -> PlanningParams:
+        """The values planner ``method`` uses: ``self`` with ``per_method[method]`` applied (and
+        ``per_method`` emptied)."""
+        if method not in PLANNER_NAMES:
+            raise ValueError(
+                f"unknown planner {method!r}; expected one of {', '.join(PLANNER_NAMES)}"
+            )
+        return self._overridden("per_method", method)

@@ -1,0 +1,97 @@
+"""Stages ``evaluate``, ``evaluate_baseline`` and the planners' (``evaluate_planner``,
+``evaluate_wm_mpc``, ``evaluate_vae_lstm_mpc``): one method, greedily, on the test scenarios
+(every training seed of an agent, ``experiment.seeds``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from socnav_wm.config import Params
+from socnav_wm.evaluation.evaluate import (
+    AGENT_METHODS,
+    BASELINE_METHODS,
+    METHODS,
+    PLANNER_METHODS,
+    evaluate_method,
+    evaluation_metrics,
+    write_evaluation,
+)
+from socnav_wm.io import check_writable, outputs_together
+from socnav_wm.stages.common import open_stage
+
+
+def run(
+    params: Params,
+    *,
+    method: str,
+    agents_dir: Path = Path("models/agents"),
+    out_dir: Path = Path("data/eval"),
+    metrics_dir: Path = Path("metrics/eval"),
+    planner_files: dict[str, Path] | None = None,
+    tracking: bool = True,
+    quiet: bool = True,
+) -> str:
+    if method not in METHODS:
+        raise ValueError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
+    stage = (
+        "evaluate_baseline"
+        if method in BASELINE_METHODS
+        else "evaluate_planner"
+        if method in PLANNER_METHODS
+        else "evaluate"
+    )
+    episodes_path = out_dir / f"{method}.parquet"
+    trajectories_path = out_dir / f"{method}-trajectories.parquet"
+    metrics_path = metrics_dir / f"{method}.json"
+    if planner_files and method not in PLANNER_METHODS:
+        roles = ", ".join(f"--{role.replace('_', '-')}" for role in planner_files)
+        raise ValueError(f"{roles}: only for a planner, not {method!r}")
+    check_writable(episodes_path, trajectories_path, metrics_path)
+    with open_stage(stage, f"evaluate/{method}", params, tracking=tracking) as run:
+        agent_paths = None
+        if method in AGENT_METHODS:
+            agent_paths = {s: agents_dir / method / f"seed-{s}.pt" for s in params.experiment.seeds}
+            for s, path in agent_paths.items():
+                if not path.is_file():
+                    raise FileNotFoundError(
+                        f"{path}: no such agent file (train it: socnav-wm train-agent "
+                        f"--variant {method} --seed {s})"
+                    )
+        overrides_of = None
+        if method in BASELINE_METHODS:
+            overrides_of = getattr(params.baselines, method).model_dump()
+        result = evaluate_method(
+            method,
+            env_params=params.env,
+            scenario_seed=params.eval.scenario_seed,
+            episodes=params.eval.episodes,
+            agent_paths=agent_paths,
+            baseline_overrides=overrides_of,
+            planning=params.planning if method in PLANNER_METHODS else None,
+            planner_files=planner_files,
+            device=params.eval.device,
+            batch_size=params.eval.batch_size,
+            quiet=quiet,
+        )
+        with outputs_together(episodes_path, trajectories_path, metrics_path) as paths:
+            write_evaluation(result, *paths)
+        content = evaluation_metrics(result)
+        run.set_tag("method", method)
+        run.log_params({"method": method})
+        if agent_paths:  # the training runs whose weights this evaluation used
+            run.link_runs(
+                "training_runs", [f"train-agent/{method}/seed-{s}" for s in sorted(agent_paths)]
+            )
+        run.log_metrics({m: v["mean"] for m, v in content["metrics"].items()})
+        run.log_metrics({f"{m}_ci_low": v["low"] for m, v in content["metrics"].items()})
+        run.log_metrics({f"{m}_ci_high": v["high"] for m, v in content["metrics"].items()})
+        run.log_metrics({"wall_time_s": result.wall_time})
+        for seed_name, means in content.get("per_seed", {}).items():  # e.g. seed-0.success
+            run.log_metrics({f"{seed_name}.{m}": v for m, v in means.items() if v == v})
+        run.log_artifact(metrics_path)
+    success = content["metrics"]["success"]
+    return (
+        f"wrote {episodes_path}: {method} success {success['mean']:.1%} "
+        f"[{success['low']:.1%}, {success['high']:.1%}] over {result.num_scenarios} scenarios "
+        f"x {len(result.training_seeds)} seed(s) in {result.wall_time:.0f} s"
+    )

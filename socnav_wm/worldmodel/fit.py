@@ -1,0 +1,146 @@
+"""The ``train-vae`` and ``train-lstm`` stages as library functions: rollouts in, models out.
+
+Both split the rollouts by episode with the same seed and fraction, so the LSTM is validated on
+episodes the VAE never saw either (when the two fractions are equal).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from socnav_wm.config import LstmParams, VaeParams
+from socnav_wm.data.shards import column_to_numpy, read_rollouts
+from socnav_wm.data.windows import Windows, make_windows, split_episodes
+from socnav_wm.worldmodel.training import (
+    LSTMTrainResult,
+    VAETrainResult,
+    encode_observations,
+    evaluate_lstm,
+    load_vae,
+    plot_latent_predictions,
+    plot_reconstruction,
+    resolve_device,
+    train_lstm,
+    train_vae,
+)
+
+EpochCallback = Callable[[int, dict[str, float]], None]
+
+
+@dataclass
+class FittedVAE:
+    result: VAETrainResult
+    data: dict[str, Any]  # sizes of the splits, for the record
+    val_sample: np.ndarray  # a few validation observations, for the reconstruction figure
+
+    def figure(self) -> Any:
+        return plot_reconstruction(self.result.model, self.val_sample)
+
+
+@dataclass
+class FittedLSTM:
+    result: LSTMTrainResult
+    metrics: dict[str, float]  # evaluate_lstm on validation windows
+    data: dict[str, Any]
+    episode: tuple[np.ndarray, np.ndarray, np.ndarray]  # one validation episode, for the figure
+
+    def figure(self) -> Any:
+        latents, actions, next_latents = self.episode
+        return plot_latent_predictions(
+            self.result.model, latents, actions, next_latents, reset_every=None
+        )
+
+
+def fit_vae(
+    rollouts: str | Path,
+    params: VaeParams,
+    *,
+    seed: int,
+    device: str = "auto",
+    on_epoch: EpochCallback | None = None,
+) -> FittedVAE:
+    """Train the VAE on every observation of the training episodes of ``rollouts``."""
+    table = read_rollouts(rollouts, columns=["episode_id", "obs"])
+    ids = column_to_numpy(table, "episode_id")
+    obs = column_to_numpy(table, "obs")
+    train, val = split_episodes(ids, params.val_fraction, seed)
+    result = train_vae(
+        obs[train],
+        obs[val],
+        latent_dim=params.latent_dim,
+        hidden_dim=params.hidden_dim,
+        kl_weight=params.kl_weight,
+        learning_rate=params.learning_rate,
+        batch_size=params.batch_size,
+        max_epochs=params.max_epochs,
+        patience=params.patience,
+        seed=seed,
+        device=resolve_device(device),
+        on_epoch=on_epoch,
+    )
+    data = {
+        "train_rows": int(train.sum()),
+        "val_rows": int(val.sum()),
+        "val_episodes": int(np.unique(ids[val]).size),
+    }
+    return FittedVAE(result=result, data=data, val_sample=obs[val][:4])
+
+
+def fit_lstm(
+    rollouts: str | Path,
+    vae_path: str | Path,
+    params: LstmParams,
+    *,
+    seed: int,
+    device: str = "auto",
+    on_epoch: EpochCallback | None = None,
+) -> FittedLSTM:
+    """Encode the rollouts with the frozen VAE (its mean), then train the latent LSTM."""
+    torch_device = resolve_device(device)
+    table = read_rollouts(rollouts, columns=["episode_id", "obs", "action", "next_obs"])
+    ids = column_to_numpy(table, "episode_id")
+    actions = column_to_numpy(table, "action").astype(np.int64)
+    vae = load_vae(vae_path, torch_device)
+    latents = encode_observations(vae, column_to_numpy(table, "obs"))
+    next_latents = encode_observations(vae, column_to_numpy(table, "next_obs"))
+    train, val = split_episodes(ids, params.val_fraction, seed)
+
+    def windows(mask: np.ndarray) -> Windows:
+        return make_windows(
+            latents[mask], actions[mask], ids[mask], next_latents[mask], params.seq_len
+        )
+
+    train_windows, val_windows = windows(train), windows(val)
+    result = train_lstm(
+        train_windows,
+        val_windows,
+        hidden_dim=params.hidden_dim,
+        learning_rate=params.learning_rate,
+        batch_size=params.batch_size,
+        max_epochs=params.max_epochs,
+        patience=params.patience,
+        seed=seed,
+        device=torch_device,
+        on_epoch=on_epoch,
+    )
+    metrics = evaluate_lstm(result.model, val_windows)
+    # The longest validation episode, for the predicted-vs-true figure.
+    val_ids = ids[val]
+    episode_ids, counts = np.unique(val_ids, return_counts=True)
+    longest = val & (ids == episode_ids[np.argmax(counts)])
+    data = {
+        "train_windows": int(train_windows.num_windows),
+        "val_windows": int(val_windows.num_windows),
+        "val_episodes": int(episode_ids.size),
+    }
+    return FittedLSTM(
+        result=result,
+        metrics=metrics,
+        data=data,
+        episode=(latents[longest], actions[longest], next_latents[longest]),
+    )

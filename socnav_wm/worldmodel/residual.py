@@ -1,0 +1,641 @@
+"""The planning world model: constant velocity with the robot's own motion exact, plus a learned
+correction of each human's velocity.
+
+What a planner needs predicted is where the goal and the humans will be, in metres. The robot
+knows its own kinematics (:mod:`socnav_wm.worldmodel.ego`): the goal's motion in the robot frame
+is pure kinematics, and so is the part of every human's apparent motion that the robot causes.
+What is unknown is how the humans move in the world. This model keeps each human's last world
+velocity (the constant-velocity baseline) and learns only its change at each step::
+
+    u_h ← cap(u_h + f(features_h))     (the human's velocity per step, robot frame)
+    p, u ← advance(p, u, v, ω)         (exact: the human moves by u_h, the robot by (v, ω))
+
+where ``cap`` scales a velocity above the humans' top speed back to it, as the simulator does.
+
+``f`` is one small MLP shared by every human. Its features are seen from the human: the human's
+own speed, and the position and velocity, relative to it, of every other human and of the
+robot (whose velocity follows from the action it executes), all rotated into the frame of the
+human's heading of motion, so one turn of the scene is one turn of the answer. Its last layer
+starts at zero: an untrained model *is* the constant-velocity baseline. It is trained through
+open-loop rollouts of ``horizon`` steps (the loss averages every step's Euclidean position
+error, as PlaNet's overshooting and TD-MPC's latent rollouts do), on the random-policy rollouts
+of ``collect``. There is no lossy bottleneck: positions in, positions out.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from socnav_wm.env.core import discrete_commands
+from socnav_wm.env.params import EnvParams
+from socnav_wm.planning.models import ConstantVelocityModel, Rollout
+from socnav_wm.worldmodel.ego import human_velocities, positions
+
+
+def _rotate(x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+    """Vectors (..., 2) turned by −φ, where ``c, s = cos φ, sin φ`` (shape ``...``)."""
+    return torch.stack([c * x[..., 0] + s * x[..., 1], -s * x[..., 0] + c * x[..., 1]], dim=-1)
+
+
+def _unrotate(x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+    """Vectors (..., 2) turned by +φ."""
+    return torch.stack([c * x[..., 0] - s * x[..., 1], s * x[..., 0] + c * x[..., 1]], dim=-1)
+
+
+def ego_advance(
+    points: torch.Tensor, velocity: torch.Tensor, v: torch.Tensor, omega: torch.Tensor, dt: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`socnav_wm.worldmodel.ego.advance` in torch (differentiable): points (B, P, 2) move
+    by ``velocity`` (B, P, 2), then the robot executes ``(v, ω)`` (B,); the new robot-frame
+    points and velocities."""
+    angle = (omega * dt)[:, None]
+    c, s = torch.cos(angle), torch.sin(angle)
+    moved = _rotate(points + velocity, c, s)
+    shift = torch.zeros_like(moved)
+    shift[..., 0] = (v * dt)[:, None]
+    return moved - shift, _rotate(velocity, c, s)
+
+
+ROOM_FEATURES = 5
+"""Per human, for a model that knows the room: the room's centre seen from the human (in the
+frame of its heading, over the half-size of the area where goals are drawn), the distance ahead
+to that area's edge along its heading (over the half-size), and its heading in the room (cos,
+sin)."""
+
+IMAGINED_UNIT = 0.1
+"""The steps-imagined feature is ``IMAGINED_UNIT × k`` (about 1 at the planner's horizon)."""
+
+CORRECTION_UNIT = 0.01
+"""The MLP's output unit (m per step). The corrections that matter are millimetres to a few
+centimetres per step; in metres, Adam's first steps (learning rate 1e-3) moved every human by
+centimetres per step, and every training ended back at constant velocity (best epoch 0)."""
+
+
+def advance_pose(
+    pose: torch.Tensor, v: torch.Tensor, omega: torch.Tensor, dt: float
+) -> torch.Tensor:
+    """The robot's room pose (B, 3: x, y, θ) after it executes ``(v, ω)`` (B,): a turn by
+    ``ω·dt``, then a step of ``v·dt`` along the new heading: the torch twin of
+    :func:`socnav_wm.worldmodel.ego.advance_pose`, for the model's differentiable rollouts."""
+    theta = pose[:, 2] + omega * dt
+    step = v * dt
+    x = pose[:, 0] + step * torch.cos(theta)
+    y = pose[:, 1] + step * torch.sin(theta)
+    return torch.stack([x, y, theta], dim=-1)
+
+
+def room_features(
+    points: torch.Tensor, velocity: torch.Tensor, pose: torch.Tensor, half: float
+) -> torch.Tensor:
+    """:data:`ROOM_FEATURES` (B, H, 5) of the humans at robot-frame ``points`` and ``velocity``
+    (B, 1 + H, 2), seen by a robot at room pose ``pose`` (B, 3), in a room whose goals are
+    drawn in ``[−half, half]²``. A person walks straight to its goal and draws a new one there,
+    so the distance to that area's edge bounds how far it can still walk straight."""
+    c, s = torch.cos(pose[:, 2])[:, None], torch.sin(pose[:, 2])[:, None]
+    where = _unrotate(points[:, 1:], c, s) + pose[:, None, :2]  # (B, H, 2) in the room
+    hc, hs = heading_of(_unrotate(velocity[:, 1:], c, s))
+    heading = torch.stack([hc, hs], dim=-1)
+    safe = torch.where(heading.abs() > 1e-9, heading, torch.full_like(heading, 1e-9))
+    to_edge = (torch.where(safe > 0, half, -half) - where) / safe
+    ahead = torch.clamp(to_edge.min(dim=-1).values, 0.0, 2.0 * half)
+    centre = _rotate(-where, hc, hs)
+    return torch.cat([centre / half, (ahead / half)[..., None], heading], dim=-1)
+
+
+def heading_of(velocity: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """cos, sin (...) of the direction of ``velocity`` (..., 2), the frame a human's features
+    are seen in; (1, 0) below 1 cm per step (a person standing, or the float32 noise of the
+    observations). The frame is a choice of coordinates, so no gradient flows through it: the
+    direction of a near-zero velocity would turn its gradient into noise of order 1/speed."""
+    u = velocity.detach()
+    speed = torch.linalg.vector_norm(u, dim=-1)
+    moving = speed > 0.01
+    safe = torch.where(moving, speed, torch.ones_like(speed))
+    c = torch.where(moving, u[..., 0] / safe, torch.ones_like(speed))
+    s = torch.where(moving, u[..., 1] / safe, torch.zeros_like(speed))
+    return c, s
+
+
+class ResidualDynamics(nn.Module):
+    """``f``: each human's change of velocity per step (B, H, 2) from the positions (B, 1 + H, 2)
+    and velocities (B, 1 + H, 2) of the goal and the humans, and the robot's command (B,) ×2.
+
+    Args:
+        num_humans: humans in the scene.
+        hidden_dim: width of the MLP's two hidden layers.
+        dt: the step (s), to turn the robot's command into its displacement per step.
+        max_speed: the humans' top speed (m/s): a corrected velocity longer than it is scaled
+            back to it, as the simulator caps theirs (None: no cap).
+        room_half: the half-size (m) of the square where the humans' goals are drawn, for a
+            model that knows the room (:func:`room_features`; every call then needs the
+            robot's room pose), or None.
+    """
+
+    def __init__(
+        self,
+        num_humans: int,
+        hidden_dim: int,
+        dt: float,
+        max_speed: float | None = None,
+        room_half: float | None = None,
+    ) -> None:
+        super().__init__()
+        self.num_humans, self.dt, self.max_speed = num_humans, dt, max_speed
+        self.room_half = room_half
+        # Own speed, then (relative position, relative velocity) of each other human and the
+        # robot, the robot's turn per step and the steps imagined so far; with the room, its
+        # ROOM_FEATURES.
+        inputs = 1 + 4 * num_humans + 2 + (0 if room_half is None else ROOM_FEATURES)
+        self.net = nn.Sequential(
+            nn.Linear(inputs, hidden_dim),
+            nn.Tanh(),
+            nn.Linear(hidden_dim, hidden_dim),
+            nn.Tanh(),
+            nn.Linear(hidden_dim, 2),
+        )
+        nn.init.zeros_(self.net[-1].weight)
+        nn.init.zeros_(self.net[-1].bias)
+
+    def features(
+        self,
+        points: torch.Tensor,
+        velocity: torch.Tensor,
+        v: torch.Tensor,
+        omega: torch.Tensor,
+        pose: torch.Tensor | None = None,
+        imagined: int = 0,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(B, H, inputs) features seen from each human, and the cos, sin (B, H) of the
+        heading of its motion (its frame); ``pose`` (B, 3): the robot's in the room;
+        ``imagined``: the steps predicted since the last real observation (a person's next
+        step is nearly certain, its tenth is not: the median of where it will be changes
+        with the lead time, and a model without it has one answer for both)."""
+        h = self.num_humans
+        p, u = points[:, 1:], velocity[:, 1:]  # (B, H, 2)
+        speed = torch.linalg.vector_norm(u, dim=-1)
+        c, s = heading_of(u)
+        robot_p = torch.zeros_like(p[:, :1])
+        robot_u = torch.zeros_like(u[:, :1])
+        robot_u[..., 0] = (v * self.dt)[:, None]
+        others_p = torch.cat([p, robot_p], dim=1)  # (B, H + 1, 2)
+        others_u = torch.cat([u, robot_u], dim=1)
+        rel_p = others_p[:, None, :, :] - p[:, :, None, :]  # (B, H, H + 1, 2)
+        rel_u = others_u[:, None, :, :] - u[:, :, None, :]
+        # Drop each human's own entry: the others in spawn order, then the robot.
+        keep = ~torch.eye(h, h + 1, dtype=torch.bool, device=p.device)
+        rel_p = rel_p[:, keep].reshape(-1, h, h, 2)
+        rel_u = rel_u[:, keep].reshape(-1, h, h, 2)
+        cs, ss = c[..., None], s[..., None]
+        rel = torch.cat([_rotate(rel_p, cs, ss), _rotate(rel_u, cs, ss)], dim=-1)
+        turn = (omega * self.dt)[:, None, None].expand(-1, h, 1)
+        lead = torch.full_like(speed[..., None], IMAGINED_UNIT * imagined)
+        parts = [speed[..., None], rel.reshape(*rel.shape[:2], -1), turn, lead]
+        if self.room_half is not None:
+            if pose is None:
+                raise ValueError(
+                    "this planning model knows the room: it needs the robot's room pose"
+                )
+            parts.append(room_features(points, velocity, pose, self.room_half))
+        return torch.cat(parts, dim=-1), c, s
+
+    def forward(
+        self,
+        points: torch.Tensor,
+        velocity: torch.Tensor,
+        v: torch.Tensor,
+        omega: torch.Tensor,
+        pose: torch.Tensor | None = None,
+        imagined: int = 0,
+    ) -> torch.Tensor:
+        x, c, s = self.features(points, velocity, v, omega, pose, imagined)
+        return _unrotate(CORRECTION_UNIT * self.net(x), c, s)
+
+    def step(
+        self,
+        points: torch.Tensor,
+        velocity: torch.Tensor,
+        v: torch.Tensor,
+        omega: torch.Tensor,
+        pose: torch.Tensor | None = None,
+        imagined: int = 0,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """One predicted step, the ``imagined``-th since the last observation: the corrected
+        velocities, then the exact motion; the new points, velocities and robot pose (None
+        without one)."""
+        humans = velocity[:, 1:] + self(points, velocity, v, omega, pose, imagined)
+        if self.max_speed is not None:
+            limit = self.max_speed * self.dt
+            length = torch.linalg.vector_norm(humans, dim=-1, keepdim=True)
+            humans = humans * torch.clamp(limit / length.clamp(min=1e-12), max=1.0)
+        velocity = torch.cat([velocity[:, :1], humans], dim=1)
+        points, velocity = ego_advance(points, velocity, v, omega, self.dt)
+        if pose is not None:
+            pose = advance_pose(pose, v, omega, self.dt)
+        return points, velocity, pose
+
+    def rollout(
+        self,
+        points: torch.Tensor,
+        velocity: torch.Tensor,
+        v: torch.Tensor,
+        omega: torch.Tensor,
+        pose: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Open-loop positions (B, K, 1 + H, 2) under the commands ``v, ω`` (B, K), from the
+        robot's room pose ``pose`` (B, 3) for a model that knows the room."""
+        out = []
+        for k in range(v.shape[1]):
+            points, velocity, pose = self.step(points, velocity, v[:, k], omega[:, k], pose, k)
+            out.append(points)
+        return torch.stack(out, dim=1)
+
+
+@dataclass(frozen=True)
+class Sequences:
+    """Training samples: the present (``obs`` after ``previous_obs`` and ``previous_action``),
+    the next ``horizon`` actions and the observed positions after each (``mask``: the step
+    was inside the episode)."""
+
+    previous_obs: np.ndarray  # (N, D)
+    obs: np.ndarray  # (N, D)
+    previous_action: np.ndarray  # (N,)
+    actions: np.ndarray  # (N, K)
+    targets: np.ndarray  # (N, K, 1 + H, 2)
+    mask: np.ndarray  # (N, K) bool
+    pose: np.ndarray | None = None  # (N, 3) the robot's room pose at ``obs``, when known
+
+    def __len__(self) -> int:
+        return len(self.obs)
+
+
+def make_sequences(
+    obs: np.ndarray,
+    actions: np.ndarray,
+    episode_ids: np.ndarray,
+    next_obs: np.ndarray,
+    horizon: int,
+    stride: int,
+    pose_after: np.ndarray | None = None,
+) -> Sequences:
+    """Samples from rollout rows (in episode order): one every ``stride`` steps of an episode,
+    from its second step on (a velocity needs two views), each followed up to ``horizon``
+    steps or the episode's end. ``pose_after`` (rows, 3): the robot's room pose after each
+    row's step (collect's ``robot_x``, ``robot_y``, ``robot_theta``); a sample's present pose
+    is the one after the step before it."""
+    from socnav_wm.data.windows import _episode_runs
+
+    starts, lengths = _episode_runs(np.asarray(episode_ids))
+    # Each episode's observations o_0 … o_n: its rows' obs, then its last next_obs.
+    full_start = starts + np.arange(len(starts))
+    full = np.empty((len(obs) + len(starts), obs.shape[1]), dtype=np.float64)
+    row_pos = np.arange(len(obs)) + np.repeat(np.arange(len(starts)), lengths)
+    full[row_pos] = obs
+    full[full_start + lengths] = next_obs[starts + lengths - 1]
+    full_actions = np.zeros(len(full), dtype=np.int64)
+    full_actions[row_pos] = actions
+    episode_of, t = [], []
+    for e, n in enumerate(lengths):
+        ts = np.arange(1, n, stride)
+        episode_of.append(np.full(len(ts), e))
+        t.append(ts)
+    episode = np.concatenate(episode_of) if episode_of else np.zeros(0, dtype=np.int64)
+    step = np.concatenate(t) if t else np.zeros(0, dtype=np.int64)
+    base = full_start[episode] + step  # index of o_t
+    k = np.arange(horizon)
+    mask = step[:, None] + k[None, :] < lengths[episode][:, None]
+    ahead = np.minimum(base[:, None] + k[None, :], (full_start + lengths)[episode][:, None] - 1)
+    return Sequences(
+        previous_obs=full[base - 1],
+        obs=full[base],
+        previous_action=full_actions[base - 1],
+        actions=np.where(mask, full_actions[ahead], 0),
+        targets=positions(full[ahead + 1]),
+        mask=mask,
+        # Row starts[e] + t holds o_t; the row before it, the pose that o_t was seen from.
+        pose=None
+        if pose_after is None
+        else np.asarray(pose_after, dtype=np.float64)[starts[episode] + step - 1],
+    )
+
+
+def _start(
+    seq_prev: np.ndarray, seq_obs: np.ndarray, prev_action: np.ndarray, env_params: EnvParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """Present positions and constant velocities (B, 1 + H, 2), float64."""
+    return positions(seq_obs), human_velocities(seq_prev, seq_obs, prev_action, env_params)
+
+
+def _step_errors(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """(B, K) the humans' mean Euclidean position error (m) at each step."""
+    squared = ((predicted[:, :, 1:] - target[:, :, 1:]) ** 2).sum(-1)
+    return torch.sqrt(squared + 1e-12).mean(-1)
+
+
+def _masked_loss(
+    predicted: torch.Tensor,
+    target: torch.Tensor,
+    mask: torch.Tensor,
+    weights: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Mean Euclidean position error (m) of the humans over the real steps: the metric itself
+    (a squared error rewards hedging, slowing every human down towards the mean turn, which
+    raises the typical error of the many who walk straight); ``weights`` (K,): each step's
+    weight."""
+    error = _step_errors(predicted, target)
+    if weights is not None:
+        error = error * weights
+    return (error * mask).sum() / mask.sum().clamp(min=1)
+
+
+@dataclass
+class ResidualTrainResult:
+    model: ResidualDynamics
+    history: list[dict[str, float]]
+    metrics: dict[str, float]
+
+
+def train_residual(
+    train: Sequences,
+    val: Sequences,
+    env_params: EnvParams,
+    *,
+    hidden_dim: int,
+    learning_rate: float,
+    batch_size: int,
+    max_epochs: int,
+    patience: int,
+    seed: int,
+    room: bool = False,
+    relative_weight: float = 0.0,
+    on_epoch: Callable[[int, dict[str, float]], None] | None = None,
+) -> ResidualTrainResult:
+    """Adam on the open-loop rollout loss, its learning rate decayed to zero over
+    ``max_epochs`` (cosine); the weights of the best validation epoch are kept (the untrained
+    model, constant velocity, is epoch 0). ``room``: the model knows the room (the samples
+    must carry the robot's poses). ``relative_weight`` ``p``: step ``k``'s error is weighted
+    by ``1 / e_k^p`` (normalised to a mean of 1), where ``e_k`` is constant velocity's mean
+    error at ``k`` on the training samples: with 0 the long steps' errors, 100× the first
+    ones', decide alone; with 1 every step counts relative to constant velocity. Validation
+    uses the plain mean (the metric)."""
+    torch.manual_seed(seed)
+    model = ResidualDynamics(
+        env_params.num_humans,
+        hidden_dim,
+        env_params.dt,
+        env_params.human_max_speed,
+        env_params.spawn_half_size if room else None,
+    )
+    if room and (train.pose is None or val.pose is None):
+        raise ValueError("planning_model.room: the training samples carry no robot poses")
+    table = torch.as_tensor(discrete_commands(env_params))
+
+    def tensors(seqs: Sequences) -> tuple[torch.Tensor, ...]:
+        points, velocity = _start(seqs.previous_obs, seqs.obs, seqs.previous_action, env_params)
+        actions = torch.as_tensor(seqs.actions)
+        return (
+            torch.as_tensor(points, dtype=torch.float32),
+            torch.as_tensor(velocity, dtype=torch.float32),
+            table[actions, 0].float(),
+            table[actions, 1].float(),
+            torch.as_tensor(seqs.targets, dtype=torch.float32),
+            torch.as_tensor(seqs.mask, dtype=torch.float32),
+            # A model that does not know the room ignores the pose (zeros when none was recorded).
+            torch.as_tensor(
+                np.zeros((len(seqs), 3)) if seqs.pose is None else seqs.pose, dtype=torch.float32
+            ),
+        )
+
+    train_t, val_t = tensors(train), tensors(val)
+
+    def validation_loss() -> float:
+        model.eval()
+        total, weight = 0.0, 0.0
+        with torch.no_grad():
+            for i in range(0, len(val), 4096):
+                p, u, v, w, y, m, pose = (x[i : i + 4096] for x in val_t)
+                predicted = model.rollout(p, u, v, w, pose)
+                total += float(_masked_loss(predicted, y, m)) * float(m.sum())
+                weight += float(m.sum())
+        return total / max(weight, 1.0)
+
+    weights = None
+    if relative_weight:
+        with torch.no_grad():
+            p, u, v, w, y, m, pose = (x[:20_000] for x in train_t)
+            error = _step_errors(model.rollout(p, u, v, w, pose), y)
+            per_step = (error * m).sum(0) / m.sum(0).clamp(min=1)
+        weights = per_step.clamp(min=1e-6) ** -relative_weight
+        weights = weights / weights.mean()
+    optimizer = torch.optim.Adam(model.parameters(), lr=learning_rate)
+    updates = max_epochs * -(-len(train) // batch_size)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=updates)
+    generator = torch.Generator().manual_seed(seed)
+    best = validation_loss()
+    history = [{"epoch": 0, "train_loss": math.nan, "val_loss": best}]
+    best_state, best_epoch, waited = copy.deepcopy(model.state_dict()), 0, 0
+    start = time.process_time()
+    for epoch in range(1, max_epochs + 1):
+        model.train()
+        order = torch.randperm(len(train), generator=generator)
+        losses = []
+        for i in range(0, len(train), batch_size):
+            rows = order[i : i + batch_size]
+            p, u, v, w, y, m, pose = (x[rows] for x in train_t)
+            predicted = model.rollout(p, u, v, w, pose)
+            loss = _masked_loss(predicted, y, m, weights)
+            optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            optimizer.step()
+            schedule.step()
+            losses.append(float(loss.detach()))
+        val_loss = validation_loss()
+        row = {"epoch": epoch, "train_loss": float(np.mean(losses)), "val_loss": val_loss}
+        history.append(row)
+        if on_epoch is not None:
+            on_epoch(epoch, {"train_loss": row["train_loss"], "val_loss": val_loss})
+        if val_loss < best:
+            best, best_epoch, waited = val_loss, epoch, 0
+            best_state = copy.deepcopy(model.state_dict())
+        else:
+            waited += 1
+            if waited >= patience:
+                break
+    model.load_state_dict(best_state)
+    model.eval()
+    metrics = {
+        "best_epoch": best_epoch,
+        "val_loss": best,
+        "val_loss_constant_velocity": history[0]["val_loss"],
+        "epochs": len(history) - 1,
+        "train_samples": len(train),
+        "cpu_seconds": time.process_time() - start,
+    }
+    return ResidualTrainResult(model=model, history=history, metrics=metrics)
+
+
+def residual_positions(
+    model: ResidualDynamics,
+    previous_obs: np.ndarray,
+    obs: np.ndarray,
+    previous_action: np.ndarray,
+    future_actions: np.ndarray,
+    env_params: EnvParams,
+    batch_size: int = 512,
+    pose: np.ndarray | None = None,
+) -> np.ndarray:
+    """Open-loop positions (B, K, 1 + H, 2), as
+    :func:`socnav_wm.worldmodel.ego.predict_positions`, in float64 (so they do not depend on
+    ``batch_size``); ``pose`` (B, 3): the robot's room pose at ``obs``, which a model that
+    knows the room needs."""
+    net = copy.deepcopy(model).double().eval()
+    points, velocity = _start(previous_obs, obs, previous_action, env_params)
+    table = torch.as_tensor(discrete_commands(env_params), dtype=torch.float64)
+    actions = torch.as_tensor(np.asarray(future_actions, dtype=np.int64))
+    poses = None if pose is None else torch.as_tensor(np.asarray(pose, dtype=np.float64))
+    out = np.empty((len(obs), actions.shape[1], *points.shape[1:]))
+    with torch.no_grad():
+        for i in range(0, len(obs), batch_size):
+            rows = slice(i, i + batch_size)
+            out[rows] = net.rollout(
+                torch.from_numpy(points[rows]),
+                torch.from_numpy(velocity[rows]),
+                table[actions[rows], 0],
+                table[actions[rows], 1],
+                None if poses is None else poses[rows],
+            ).numpy()
+    return out
+
+
+class _ResidualRollout:
+    def __init__(
+        self,
+        model: ResidualDynamics,
+        points: np.ndarray,
+        velocity: np.ndarray,
+        pose: np.ndarray | None,
+        table: torch.Tensor,
+    ) -> None:
+        self.model, self.table = model, table
+        self.points = torch.as_tensor(points, dtype=torch.float32)
+        self.velocity = torch.as_tensor(velocity, dtype=torch.float32)
+        self.pose = None if pose is None else torch.as_tensor(pose, dtype=torch.float32)
+        self.imagined = 0
+
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        a = torch.as_tensor(np.asarray(actions, dtype=np.int64))
+        with torch.no_grad():
+            self.points, self.velocity, self.pose = self.model.step(
+                self.points,
+                self.velocity,
+                self.table[a, 0],
+                self.table[a, 1],
+                self.pose,
+                self.imagined,
+            )
+        self.imagined += 1
+        return self.points.numpy().astype(np.float64)
+
+
+class ResidualPlanningModel(ConstantVelocityModel):
+    """A :class:`~socnav_wm.planning.models.PlanningModel` that follows the episodes as the
+    constant-velocity one does and imagines with the learned correction (float32). A model
+    that knows the room imagines from the robot's room pose, which the planner passes
+    (``planning.walls``)."""
+
+    def __init__(self, model: ResidualDynamics, params: EnvParams) -> None:
+        super().__init__(params)
+        self.net = copy.deepcopy(model).float().eval()
+        self.table = torch.as_tensor(discrete_commands(params), dtype=torch.float32)
+
+    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
+        if self.net.room_half is not None and pose is None:
+            raise ValueError(
+                "wm-mpc: its planning model knows the room and needs the robot's pose "
+                "(set planning.walls: true)"
+            )
+        return _ResidualRollout(
+            self.net,
+            np.repeat(self._points, repeats, axis=0),
+            np.repeat(self._velocity, repeats, axis=0),
+            None if pose is None else np.repeat(np.asarray(pose), repeats, axis=0),
+            self.table,
+        )
+
+
+def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, Any]) -> None:
+    """The model's weights and what rebuilds it (torch.save)."""
+    torch.save(
+        {
+            "format": "socnav-wm residual-cv",
+            "state_dict": result.model.state_dict(),
+            "num_humans": result.model.num_humans,
+            "hidden_dim": result.model.net[0].out_features,
+            "dt": result.model.dt,
+            "max_speed": result.model.max_speed,
+            "room_half": result.model.room_half,
+            "settings": settings,
+            "metrics": result.metrics,
+        },
+        path,
+    )
+
+
+def load_residual(path: Any) -> ResidualDynamics:
+    """A model written by :func:`save_residual`; one line when the file is not one."""
+    data = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(data, dict) or data.get("format") != "socnav-wm residual-cv":
+        raise ValueError(f"{path}: not a socnav-wm residual-cv planning model")
+    model = ResidualDynamics(
+        data["num_humans"],
+        data["hidden_dim"],
+        data["dt"],
+        data.get("max_speed"),
+        data.get("room_half"),
+    )
+    model.load_state_dict(data["state_dict"])
+    return model.eval()
+
+
+def fit_residual(
+    rollouts: Any,
+    env_params: EnvParams,
+    *,
+    seed: int,
+    horizon: int,
+    stride: int,
+    val_fraction: float,
+    **training: Any,
+) -> ResidualTrainResult:
+    """Train on the rollouts' training episodes, validate on the held-out ones (split as the
+    VAE's and the LSTM's, by episode with ``seed``)."""
+    from socnav_wm.data.shards import column_to_numpy, read_rollouts
+    from socnav_wm.data.windows import split_episodes
+
+    for name, value in (("horizon", horizon), ("stride", stride)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+    poses = ["robot_x", "robot_y", "robot_theta"]
+    table = read_rollouts(rollouts, columns=["episode_id", "obs", "action", "next_obs", *poses])
+    ids = column_to_numpy(table, "episode_id")
+    obs = column_to_numpy(table, "obs")
+    actions = column_to_numpy(table, "action").astype(np.int64)
+    next_obs = column_to_numpy(table, "next_obs")
+    pose_after = np.stack([column_to_numpy(table, name) for name in poses], axis=-1)
+    train, val = split_episodes(ids, val_fraction, seed)
+
+    def sequences(rows: np.ndarray) -> Sequences:
+        return make_sequences(
+            obs[rows], actions[rows], ids[rows], next_obs[rows], horizon, stride, pose_after[rows]
+        )
+
+    return train_residual(sequences(train), sequences(val), env_params, seed=seed, **training)
