@@ -31,9 +31,10 @@ from pydantic import BaseModel, BeforeValidator, Field, ValidationError, field_v
 
 from socnav_wm.agents.baselines import OrcaBaselineParams, SfmBaselineParams
 from socnav_wm.agents.params import METHOD_NAMES, VARIANT_NAMES, AgentParams
-from socnav_wm.env.params import EnvParams, Section, describe_error
+from socnav_wm.env.params import EnvParams
 from socnav_wm.io import atomic_path
 from socnav_wm.planning.params import PlanningParams
+from socnav_wm.section import Section, describe_error, one_line, short_repr
 
 Device = Literal["auto", "cpu", "cuda"]
 
@@ -433,11 +434,11 @@ def _parse_yaml(text: str, source: str) -> Any:
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        problem = _one_line(exc.problem or exc.context or "syntax error")
+        problem = one_line(exc.problem or exc.context or "syntax error")
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         raise ConfigError(f"{source}: not valid YAML ({where}{problem})") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{source}: not valid YAML ({_one_line(str(exc))})") from None
+        raise ConfigError(f"{source}: not valid YAML ({one_line(str(exc))})") from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -504,7 +505,7 @@ def _apply_override(raw: dict[str, Any], override: str, source: str) -> str:
             child = target[part] = {}
         if not isinstance(child, dict):
             where = ".".join(parts[: depth + 1])
-            raise ConfigError(f"{source}: {where}: expected a mapping, got {_short_repr(child)}")
+            raise ConfigError(f"{source}: {where}: expected a mapping, got {short_repr(child)}")
         target = child
     target[parts[-1]] = value
     return key
@@ -520,7 +521,7 @@ def _read_yaml_mapping(path: str | Path) -> dict[str, Any]:
     except IsADirectoryError:
         raise ConfigError(f"{source}: is a directory, expected a YAML file") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{source}: cannot read ({_one_line(str(exc))})") from None
+        raise ConfigError(f"{source}: cannot read ({one_line(str(exc))})") from None
     raw = _parse_yaml(text, source)
     if raw is None:  # an empty file: all defaults
         return {}
@@ -612,15 +613,6 @@ def _describe(error: Mapping[str, Any]) -> tuple[str, str]:
         key = ".".join(str(part) for part in error["loc"])
         return key, _unknown_key(key)
     return describe_error(error)
-
-
-def _short_repr(value: Any, limit: int = 60) -> str:
-    text = _one_line(repr(value))
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _one_line(text: str) -> str:
-    return " ".join(text.split())
 
 
 # ---------------------------------------------------------------------------------------------

@@ -29,8 +29,9 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from socnav_wm.env import orca
-from socnav_wm.env.params import EnvParams, Section
+from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import BatchState
+from socnav_wm.section import Section, non_negative, positive
 
 __all__ = [
     "BASELINES",
@@ -132,14 +133,6 @@ def _goal_direction(state: BatchState) -> tuple[np.ndarray, np.ndarray]:
 # --------------------------------------------------------------------------------------------
 
 
-def _positive(default: float) -> Any:
-    return Field(default, gt=0, allow_inf_nan=False)
-
-
-def _non_negative(default: float) -> Any:
-    return Field(default, ge=0, allow_inf_nan=False)
-
-
 class OrcaBaselineParams(Section):
     """The ORCA robot's parameters. Lengths in metres, times in seconds, angles in radians.
 
@@ -151,16 +144,16 @@ class OrcaBaselineParams(Section):
     SECTION: ClassVar[str] = "baselines.orca"
     name: ClassVar[str] = "orca"
 
-    neighbor_dist: float = _positive(4.0)
+    neighbor_dist: float = positive(4.0)
     """Humans whose centre is closer than this to the robot's are avoided (m)."""
     max_neighbors: int = Field(10, gt=0)
     """At most this many nearest humans are avoided (more than the room holds by default)."""
-    time_horizon: float = _positive(5.0)
+    time_horizon: float = positive(5.0)
     """Collisions with humans are avoided over this horizon (s)."""
-    time_horizon_obst: float = _positive(2.0)
+    time_horizon_obst: float = positive(2.0)
     """Collisions with walls are avoided over this horizon (s); walls do not move, so a short
     horizon keeps the robot from being pushed off goals near a wall."""
-    safety_margin: float = _non_negative(0.2)
+    safety_margin: float = non_negative(0.2)
     """Added to the robot's radius in ORCA (m). The humans do not reciprocate (none sees the
     robot, except SFM humans 5% of the time) while ORCA assumes they take half of the
     avoidance, and they turn towards new goals without warning, so the robot keeps a buffer.
@@ -172,7 +165,7 @@ class OrcaBaselineParams(Section):
     preferred velocity lies on the velocity obstacle's axis and ORCA only slows down; a fixed
     turn to the right does the same deterministically (and passes people on the robot's left,
     the "keep right" convention)."""
-    heading_gain: float = _non_negative(1.0)
+    heading_gain: float = non_negative(1.0)
     """Fraction of the heading error turned in one step (see :func:`unicycle_command`)."""
 
     @field_validator("symmetry_bias")
@@ -289,28 +282,28 @@ class SfmBaselineParams(Section):
     SECTION: ClassVar[str] = "baselines.sfm"
     name: ClassVar[str] = "sfm"
 
-    relaxation_time: float = _positive(1.0)
+    relaxation_time: float = positive(1.0)
     """τ of the goal attraction (v0·e_goal − v)/τ (s). The relaxation is integrated exactly over
     a step (v → v0·e + (v − v0·e)·exp(−dt/τ)), which stays stable for τ < dt too."""
-    human_strength: float = _non_negative(0.4)
+    human_strength: float = non_negative(0.4)
     """A of the human repulsion A·exp((r_ij − d_ij)/B)·n_ij (m/s²), r_ij the sum of radii and
     d_ij the centre distance: the push at contact."""
-    human_range: float = _positive(0.4)
+    human_range: float = positive(0.4)
     """B of the human repulsion (m): the push falls by e for every B of clearance."""
-    wall_strength: float = _non_negative(0.4)
+    wall_strength: float = non_negative(0.4)
     """A of the wall repulsion A·exp((r − d)/B)·n (m/s²), d the distance to the wall face."""
-    wall_range: float = _positive(0.1)
+    wall_range: float = positive(0.1)
     """B of the wall repulsion (m). Short: goals may lie 0.3 m from a wall."""
     anisotropy: float = Field(0.3, allow_inf_nan=False)
     """λ of Helbing's field of view: a human straight ahead weighs 1, one behind the robot
     weighs λ (weight λ + (1 − λ)(1 + cos φ)/2, φ the angle between the goal direction and the
     direction to the human)."""
-    side_bias: float = _non_negative(0.5)
+    side_bias: float = non_negative(0.5)
     """Sideways share of the push from a human ahead of the robot, turning it to its right
     (Helbing & Molnár's "keep right" asymmetry). Without it a person standing on the straight
     line to the goal pushes exactly against the goal attraction and the robot stops in front of
     them; it scales with cos φ (zero for humans beside or behind)."""
-    heading_gain: float = _non_negative(1.0)
+    heading_gain: float = non_negative(1.0)
     """Fraction of the heading error turned in one step (see :func:`unicycle_command`)."""
 
     @field_validator("anisotropy")

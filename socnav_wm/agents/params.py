@@ -16,8 +16,8 @@ from typing import Annotated, Any, ClassVar, Literal, Self
 
 from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
-from socnav_wm.env.params import Section
 from socnav_wm.planning.params import PLANNER_NAMES
+from socnav_wm.section import Section, as_tuple
 
 VARIANT_NAMES: tuple[str, ...] = (
     "dueling-dqn",
@@ -69,11 +69,6 @@ def _below_one(value: float) -> float:
     return value
 
 
-def _as_tuple(value: Any) -> Any:
-    # YAML gives a list; the field is a tuple so that the frozen model stays hashable.
-    return tuple(value) if isinstance(value, list) else value
-
-
 def _layer_sizes(value: tuple[int, ...]) -> tuple[int, ...]:
     if not value or any(size <= 0 for size in value):
         raise ValueError(f"expected a non-empty list of positive integers, got {list(value)!r}")
@@ -82,7 +77,7 @@ def _layer_sizes(value: tuple[int, ...]) -> tuple[int, ...]:
 
 Unit = Annotated[float, Field(allow_inf_nan=False), AfterValidator(_in_unit)]
 """A finite float in [0, 1]."""
-LayerSizes = Annotated[tuple[int, ...], BeforeValidator(_as_tuple), AfterValidator(_layer_sizes)]
+LayerSizes = Annotated[tuple[int, ...], BeforeValidator(as_tuple), AfterValidator(_layer_sizes)]
 """Widths of fully connected layers: a non-empty list of positive integers."""
 
 

@@ -9,7 +9,7 @@ from typing import Annotated, Any, ClassVar, Literal, Self
 
 from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
-from socnav_wm.env.params import Section
+from socnav_wm.section import Section, as_tuple, finite
 
 PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc")
 """The planning methods: receding-horizon control over the paper's four actions, each with its
@@ -21,10 +21,6 @@ Continuation = Literal["goal", "stop", "forward"]
 CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")
 
 
-def _as_tuple(value: Any) -> Any:
-    return tuple(value) if isinstance(value, list) else value
-
-
 def _distinct(value: tuple[str, ...]) -> tuple[str, ...]:
     if not value:
         raise ValueError("expected at least one continuation")
@@ -34,12 +30,8 @@ def _distinct(value: tuple[str, ...]) -> tuple[str, ...]:
 
 
 Continuations = Annotated[
-    tuple[Continuation, ...], BeforeValidator(_as_tuple), AfterValidator(_distinct)
+    tuple[Continuation, ...], BeforeValidator(as_tuple), AfterValidator(_distinct)
 ]
-
-
-def _finite(default: float, **bounds: float) -> Any:
-    return Field(default, allow_inf_nan=False, **bounds)
 
 
 class PlanningParams(Section):
@@ -59,18 +51,18 @@ class PlanningParams(Section):
     continuations: Continuations = CONTINUATIONS
     """What follows a prefix: ``goal`` (turn towards the predicted goal, then advance), ``stop``,
     ``forward``."""
-    discount: float = _finite(0.95, gt=0, le=1)
+    discount: float = finite(0.95, gt=0, le=1)
     """Weight γᵏ of step k's terms: the same outcome sooner scores higher."""
-    goal_reward: float = _finite(10.0, ge=0)
+    goal_reward: float = finite(10.0, ge=0)
     """Added once when the predicted robot reaches the goal (the candidate's end)."""
-    collision_cost: float = _finite(10.0, ge=0)
+    collision_cost: float = finite(10.0, ge=0)
     """Subtracted once when a predicted human touches the robot (the candidate's end)."""
-    discomfort_cost: float = _finite(0.1, ge=0)
+    discomfort_cost: float = finite(0.1, ge=0)
     """Subtracted per step where a predicted human is nearer than the scenario's
     ``discomfort_distance`` (0.9999 m, the paper's) surface to surface."""
-    progress_weight: float = _finite(1.0, ge=0)
+    progress_weight: float = finite(1.0, ge=0)
     """Weight of each step's progress towards the goal (metres)."""
-    safety_margin: float = _finite(0.0, ge=0)
+    safety_margin: float = finite(0.0, ge=0)
     """Added to the radii when testing a predicted contact (m)."""
     walls: bool = True
     """The planner knows the room and the robot's pose in it (a map and localisation, which
