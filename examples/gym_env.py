@@ -16,7 +16,7 @@ import math
 import gymnasium as gym
 import numpy as np
 
-import socnav_wm.env  # noqa: F401  (registers SocNav-v0; gymnasium also finds it by entry point)
+import socnav_wm  # noqa: F401  (registers SocNav-v0; or gym.make("socnav_wm:SocNav-v0") alone)
 
 STOP, FORWARD, LEFT, RIGHT = range(4)  # the paper's actions
 

@@ -37,7 +37,8 @@ def main(argv: list[str] | None = None) -> dict[str, int]:
 
     env_params = EnvParams()
     if args.model:
-        from socnav_wm.worldmodel.residual import ResidualPlanningModel, load_residual
+        from socnav_wm.planning.residual import ResidualPlanningModel
+        from socnav_wm.worldmodel.residual import load_residual
 
         model = ResidualPlanningModel(load_residual(args.model), env_params)
     else:

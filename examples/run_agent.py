@@ -15,7 +15,7 @@ import argparse
 
 import gymnasium as gym
 
-import socnav_wm.env  # noqa: F401  (registers SocNav-v0)
+import socnav_wm  # noqa: F401  (registers SocNav-v0)
 from socnav_wm.agents.agent_file import load_agent
 from socnav_wm.config import EvalParams
 
@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> list[str]:
 
     agent = load_agent(args.agent, args.device)
     env_options = agent.env_params.to_dict()  # the scenarios the agent was trained on
-    env = gym.make("SocNav-v0", max_episode_steps=env_options["max_steps"], **env_options)
+    env = gym.make("SocNav-v0", **env_options)
     outcomes = []
     for scenario in range(args.episodes):
         obs, _ = env.reset(seed=args.scenario_seed, options={"scenario_id": scenario})

@@ -2,7 +2,7 @@
 
     python examples/sb3_dqn.py --timesteps 200000 --test-episodes 500
 
-The env is the registered gymnasium one (``socnav_wm.env:SocNav-v0``). ``ProgressReward`` adds the
+The env is the registered gymnasium one (``socnav_wm:SocNav-v0``). ``ProgressReward`` adds the
 learning-only progress reward the project's own trainer uses, ``NearestHumansFirst`` orders the
 humans nearest first. The test runs the greedy policy on scenarios ``0..N−1`` of the project's
 test seed (``eval.scenario_seed`` of params.yaml), the same scenarios as ``socnav-wm evaluate``,
@@ -25,7 +25,7 @@ from socnav_wm.env.wrappers import NearestHumansFirst, ProgressReward
 
 
 def make_env(progress_weight: float) -> gym.Env:
-    return NearestHumansFirst(ProgressReward(gym.make("socnav_wm.env:SocNav-v0"), progress_weight))
+    return NearestHumansFirst(ProgressReward(gym.make("socnav_wm:SocNav-v0"), progress_weight))
 
 
 def test(model: DQN, episodes: int, seed: int) -> dict[str, float]:

@@ -82,7 +82,7 @@ def _env_stepper(
     """A reset env and a function doing one step of it that returns the env-steps done."""
     import gymnasium as gym
 
-    import socnav_wm.env  # noqa: F401  (registers SocNav-v0)
+    import socnav_wm  # noqa: F401  (registers SocNav-v0)
 
     cursor = [0]
     if n == 1:
@@ -219,10 +219,10 @@ def bench_train(
     from socnav_wm.agents.params import AgentParams, check_variant
     from socnav_wm.agents.replay import ReplayBuffer
     from socnav_wm.agents.training import step_and_restart
+    from socnav_wm.devices import resolve_device
     from socnav_wm.env.core import NUM_ACTIONS, Simulator
     from socnav_wm.env.params import EnvParams
     from socnav_wm.worldmodel.lstm import LatentLSTM
-    from socnav_wm.worldmodel.training import resolve_device
     from socnav_wm.worldmodel.vae import VAE
 
     check_variant(variant)
@@ -411,30 +411,32 @@ def bench_plan(
     process's CPU time per decision (one core when torch has one thread).
 
     Args:
-        methods: planner names (:data:`socnav_wm.planning.params.PLANNER_NAMES`).
+        methods: planner names (:data:`socnav_wm.planning.params.PLANNER_NAMES`; the registry,
+            :mod:`socnav_wm.methods`, builds them).
         batch_sizes: the ``n`` of each row.
         env_params: the scenarios' parameters.
         planning: the ``planning`` section.
         files: each learned planner's model files by role (default: the pipeline's paths).
     """
     from socnav_wm.env.core import Simulator
-    from socnav_wm.planning.methods import model_files, planner_policy
+    from socnav_wm.methods import method as lookup
 
     rows = []
     for method in methods:
-        chosen = model_files(method, (files or {}).get(method))
+        planner = lookup(method)
+        policies = planner.policies(
+            env_params, files=planner.files((files or {}).get(method)), planning=planning
+        )
         for n in batch_sizes:
             sim = Simulator(n, env_params)
             obs, _ = sim.reset(seed=seed)
-            policy, reads_simulator = planner_policy(method, env_params, planning, chosen)
+            policy, reads_simulator = policies()
             state = {"obs": obs}
 
             def decide(sim=sim, policy=policy, reads_simulator=reads_simulator, state=state, n=n):
                 actions = policy(sim if reads_simulator else state["obs"])
-                state["obs"] = sim.step(actions).obs
-                if sim.state.done.any():
-                    sim.reset_envs(sim.state.done)
-                    state["obs"] = sim.observation
+                sim.step(actions)
+                state["obs"] = sim.autoreset(sim.state.done)
                 return n
 
             for _ in range(2):  # warm-up

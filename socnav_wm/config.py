@@ -24,19 +24,35 @@ import re
 import typing
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Any
 
 import yaml
-from pydantic import BaseModel, BeforeValidator, Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, ValidationError
 
-from socnav_wm.agents.baselines import OrcaBaselineParams, SfmBaselineParams
-from socnav_wm.agents.params import METHOD_NAMES, VARIANT_NAMES, AgentParams
+from socnav_wm.agents.baseline_params import BaselinesParams
+from socnav_wm.agents.params import (
+    AgentParams,
+    ExperimentParams,
+)
+from socnav_wm.data.params import CollectParams
 from socnav_wm.env.params import EnvParams
+from socnav_wm.evaluation.params import EvalParams, ReportParams
 from socnav_wm.io import atomic_path
 from socnav_wm.planning.params import PlanningParams
-from socnav_wm.section import Section, describe_error, one_line, short_repr
-
-Device = Literal["auto", "cpu", "cuda"]
+from socnav_wm.section import (
+    Device,
+    Section,
+    describe_error,
+    one_line,
+    short_repr,
+)
+from socnav_wm.studies.params import StudyParams, default_studies
+from socnav_wm.worldmodel.params import (
+    LstmParams,
+    PlanningModelParams,
+    PredictionParams,
+    VaeParams,
+)
 
 __all__ = [
     "AgentParams",
@@ -75,281 +91,6 @@ class ConfigError(ValueError):
 # coercing), finite floats (`.inf` passes `gt=0`), frozen, unknown keys rejected.
 
 
-class CollectParams(Section):
-    """Random-policy rollouts written to ``data/rollouts/shard-*.parquet``."""
-
-    SECTION: ClassVar[str] = "collect"
-
-    episodes: int = Field(6000, gt=0)
-    """Number of complete episodes to record."""
-    num_envs: int = Field(512, gt=0)
-    """Environments stepped together in one batch (memory and speed, not the data)."""
-    max_rows_per_shard: int = Field(400_000, gt=0)
-    """A Parquet shard is closed once it holds this many steps (rows)."""
-
-
-class VaeParams(Section):
-    """The VAE that compresses the 23-d observation into a latent vector."""
-
-    SECTION: ClassVar[str] = "vae"
-
-    latent_dim: int = Field(16, gt=0)
-    """Size of the latent vector z."""
-    hidden_dim: int = Field(256, gt=0)
-    """Width of the encoder and decoder hidden layers."""
-    kl_weight: float = Field(0.01, ge=0, allow_inf_nan=False)
-    """Weight of the KL term against the reconstruction loss (1 is the plain ELBO, the
-    paper's)."""
-    learning_rate: float = Field(1e-3, gt=0, allow_inf_nan=False)
-    """Adam learning rate."""
-    batch_size: int = Field(512, gt=0)
-    """Observations per gradient step."""
-    max_epochs: int = Field(20, gt=0)
-    """Upper bound on passes over the training split."""
-    patience: int = Field(5, gt=0)
-    """Stop after this many epochs without a better validation loss."""
-    val_fraction: float = Field(0.05, gt=0, le=0.5, allow_inf_nan=False)
-    """Fraction of episodes held out for validation (split by episode, never by step)."""
-    device: Device = "auto"
-    """`auto` uses CUDA when available, else the CPU."""
-
-
-class LstmParams(Section):
-    """The LSTM that predicts the next latent from the latent and the action."""
-
-    SECTION: ClassVar[str] = "lstm"
-
-    hidden_dim: int = Field(256, gt=0)
-    """Size of the LSTM hidden and cell states."""
-    seq_len: int = Field(16, ge=2)
-    """Length of the training windows (steps); at least 2 to have one transition."""
-    learning_rate: float = Field(1e-3, gt=0, allow_inf_nan=False)
-    """Adam learning rate."""
-    batch_size: int = Field(256, gt=0)
-    """Windows per gradient step."""
-    max_epochs: int = Field(20, gt=0)
-    """Upper bound on passes over the training split."""
-    patience: int = Field(5, gt=0)
-    """Stop after this many epochs without a better validation loss."""
-    val_fraction: float = Field(0.05, gt=0, le=0.5, allow_inf_nan=False)
-    """Fraction of episodes held out for validation (split by episode, never by step)."""
-    device: Device = "auto"
-    """`auto` uses CUDA when available, else the CPU."""
-
-
-def _known_distinct_variants(value: list[str]) -> list[str]:
-    for name in value:
-        if name not in VARIANT_NAMES:
-            raise ValueError(f"unknown {name!r}; expected some of {', '.join(VARIANT_NAMES)}")
-    if len(set(value)) != len(value):
-        raise ValueError(f"a variant is listed twice in {value}")
-    return value
-
-
-def _distinct_non_negative(value: list[int]) -> list[int]:
-    if any(seed < 0 for seed in value):
-        raise ValueError(f"must be non-negative, got {value}")
-    if len(set(value)) != len(value):
-        raise ValueError(f"a seed is listed twice in {value}")
-    return value
-
-
-class ExperimentParams(Section):
-    """Which agents the pipeline trains: every variant × every seed (``dvc.yaml``'s matrix)."""
-
-    SECTION: ClassVar[str] = "experiment"
-
-    variants: list[str] = Field(default_factory=lambda: list(VARIANT_NAMES), min_length=1)
-    """Agent variants to train and evaluate (socnav_wm/agents/params.py lists them)."""
-    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=1)
-    """Training seeds of every variant; results are reported over seeds and scenarios."""
-
-    @field_validator("variants")
-    @classmethod
-    def _known_variants(cls, value: list[str]) -> list[str]:
-        return _known_distinct_variants(value)
-
-    @field_validator("seeds")
-    @classmethod
-    def _distinct_seeds(cls, value: list[int]) -> list[int]:
-        return _distinct_non_negative(value)
-
-
-class EvalParams(Section):
-    """The paired test: every method runs the same scenarios ``0..episodes-1``."""
-
-    SECTION: ClassVar[str] = "eval"
-
-    episodes: int = Field(500, gt=0)
-    """Test scenarios per method and training seed (the paper: 500)."""
-    scenario_seed: int = Field(1_000_003, ge=0)
-    """Seed of the test scenarios; training scenarios use other seeds (never these)."""
-    batch_size: int = Field(500, gt=0)
-    """Scenarios simulated together (speed only: results do not depend on it)."""
-    device: Device = "auto"
-    """Where the agents' networks run."""
-
-
-class BaselinesParams(Section):
-    """The ORCA and Social Force robots' parameters (socnav_wm/agents/baselines.py documents
-    each, and how it was chosen)."""
-
-    SECTION: ClassVar[str] = "baselines"
-
-    orca: OrcaBaselineParams = Field(default_factory=OrcaBaselineParams)
-    """The ORCA robot (:class:`~socnav_wm.agents.baselines.OrcaBaselineParams`)."""
-    sfm: SfmBaselineParams = Field(default_factory=SfmBaselineParams)
-    """The Social Force robot (:class:`~socnav_wm.agents.baselines.SfmBaselineParams`)."""
-
-
-class ReportParams(Section):
-    """The report: paired tests, figures."""
-
-    SECTION: ClassVar[str] = "report"
-
-    reference: str = "dueling-dqn"
-    """The method every other is compared with, scenario by scenario."""
-    alpha: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
-    """Family-wise error rate of the paired tests (Holm-corrected)."""
-    smoothing_window: int = Field(100, gt=0)
-    """Rolling-mean window of the training curves (episodes)."""
-    gif_scenarios: list[Annotated[int, Field(ge=0)]] = Field(default_factory=lambda: [0, 1, 2])
-    """Test scenarios shown side by side in reports/figures/scenarios.gif (empty: no GIF)."""
-
-    @field_validator("reference")
-    @classmethod
-    def _known_method(cls, value: str) -> str:
-        if value not in METHOD_NAMES:
-            raise ValueError(f"unknown method {value!r}; expected one of {', '.join(METHOD_NAMES)}")
-        return value
-
-
-class PlanningModelParams(Section):
-    """The planning world model (socnav_wm/worldmodel/residual.py): constant velocity with the
-    robot's own motion exact, plus a learned per-human correction of each human's velocity,
-    trained through open-loop rollouts of ``horizon`` steps on the collected rollouts."""
-
-    SECTION: ClassVar[str] = "planning_model"
-
-    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=1)
-    """Training seeds (initialisation, shuffles, split); one model file per seed, seed 0's plans
-    for ``wm-mpc``."""
-    horizon: int = Field(16, gt=0)
-    """Open-loop steps in the loss (the planner looks 12 ahead)."""
-    stride: int = Field(4, gt=0)
-    """Steps between the starts of consecutive training samples of an episode."""
-    hidden_dim: int = Field(64, gt=0)
-    """Width of the correction's two hidden layers."""
-    learning_rate: float = Field(3e-3, gt=0, allow_inf_nan=False)
-    """Adam's first step, decayed to zero over ``max_epochs`` (cosine)."""
-    batch_size: int = Field(1024, gt=0)
-    """Samples per update."""
-    max_epochs: int = Field(14, gt=0)
-    """Epochs at most."""
-    patience: int = Field(5, gt=0)
-    """Epochs without a better validation loss before stopping (the best epoch is kept)."""
-    val_fraction: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)
-    """Share of the rollout episodes held out for validation."""
-    relative_weight: float = Field(0.5, ge=0, le=2, allow_inf_nan=False)
-    """Step ``k``'s error counts ``1 / e_k^relative_weight`` in the loss, ``e_k`` being constant
-    velocity's mean error at ``k`` (0: the plain mean, which the last steps' errors, 100× the
-    first ones', decide alone; 1: every step relative to constant velocity; 0.5, between them,
-    is better than constant velocity far ahead and as good near it: docs/worldmodel.md)."""
-    room: bool = True
-    """The model knows the room: each person's features include where it is in the room and
-    how far ahead the area where goals are drawn ends (the robot's pose, known to a robot with
-    a map, places them); wm-mpc then needs ``planning.walls``. False: observations only."""
-
-    @field_validator("seeds")
-    @classmethod
-    def _distinct_seeds(cls, value: list[int]) -> list[int]:
-        return _distinct_non_negative(value)
-
-
-class PredictionParams(Section):
-    """The ``predict`` stage (socnav_wm/worldmodel/prediction.py): each world model's k-step
-    errors in metres, open loop with the true actions after a warm-up on the real trajectory,
-    under the random policy and a trained agent's ε-greedy one, on fresh scenarios."""
-
-    SECTION: ClassVar[str] = "prediction"
-
-    episodes: int = Field(300, gt=0)
-    """Scenarios per policy."""
-    scenario_seed: int = Field(2_000_003, ge=0)
-    """Their seed: neither a training, a validation nor the test seed."""
-    warmup: int = Field(5, gt=0)
-    """Real steps before each open-loop rollout."""
-    horizon: int = Field(16, gt=0)
-    """Steps ahead: k = 1 … horizon."""
-    epsilon: float = Field(0.2, ge=0, le=1, allow_inf_nan=False)
-    """Exploration of the agent's policy (a random action with this probability)."""
-
-
-GridValue = bool | int | float | str
-
-
-def _seed_range(value: Any) -> Any:
-    """``"0-4"`` → ``[0, 1, 2, 3, 4]`` (the CLI's spelling); lists pass through."""
-    if isinstance(value, str):
-        first, sep, last = value.partition("-")
-        if not (sep and first.isdigit() and last.isdigit() and int(first) <= int(last)):
-            raise ValueError(f"expected a list of seeds or a range like '0-4', got {value!r}")
-        return list(range(int(first), int(last) + 1))
-    return value
-
-
-class StudyParams(Section):
-    """One study: the agent runs ``variants`` × ``seeds`` × every combination of ``grid``'s
-    values, each exactly ``socnav-wm train-agent --variant V --seed S --set KEY=VALUE …``
-    followed by ``socnav-wm evaluate`` (``socnav-wm sweep --study NAME`` runs it)."""
-
-    SECTION: ClassVar[str] = "studies.<name>"
-
-    variants: list[str] = Field(min_length=1)
-    """Agent variants of every grid point."""
-    seeds: Annotated[list[int], BeforeValidator(_seed_range)] = Field(min_length=1)
-    """Training seeds of every grid point (a list, or a range such as ``0-4``)."""
-    grid: dict[str, list[GridValue]] = Field(default_factory=dict)
-    """Dotted ``params.yaml`` key → the values it takes (any key ``--set`` accepts); every
-    combination is one grid point. Empty: the shipped parameters only."""
-    overrides: list[str] = Field(default_factory=list)
-    """``--set`` overrides applied to every run of the study before the grid's values."""
-
-    @field_validator("variants")
-    @classmethod
-    def _known_variants(cls, value: list[str]) -> list[str]:
-        return _known_distinct_variants(value)
-
-    @field_validator("seeds")
-    @classmethod
-    def _distinct_seeds(cls, value: list[int]) -> list[int]:
-        return _distinct_non_negative(value)
-
-    @field_validator("grid")
-    @classmethod
-    def _non_empty_values(cls, value: dict[str, list[GridValue]]) -> dict[str, list[GridValue]]:
-        for key, values in value.items():
-            if not values:
-                raise ValueError(f"{key}: lists no values")
-            if len(set(map(repr, values))) != len(values):
-                raise ValueError(f"{key}: a value is listed twice in {values}")
-        return value
-
-
-def _default_studies() -> dict[str, StudyParams]:
-    return {
-        "horizon": StudyParams(
-            variants=["2stepahead", "2stepahead-maspm"],
-            seeds=[0, 1, 2, 3, 4],
-            grid={"agent.horizon": [2, 4, 8, 16]},
-        ),
-        "seeds": StudyParams(variants=list(VARIANT_NAMES), seeds=[0, 1, 2, 3, 4]),
-        "sort_humans": StudyParams(
-            variants=["dueling-dqn"], seeds=[0, 1, 2], grid={"agent.sort_humans": [True, False]}
-        ),
-    }
-
-
 class Params(Section):
     """Everything ``params.yaml`` can hold; every section is optional."""
 
@@ -379,7 +120,7 @@ class Params(Section):
     """The world models' k-step errors in metres (the ``predict`` stage)."""
     report: ReportParams = Field(default_factory=ReportParams)
     """Statistics and figures of the report."""
-    studies: dict[str, StudyParams] = Field(default_factory=_default_studies)
+    studies: dict[str, StudyParams] = Field(default_factory=default_studies)
     """Named grids of agent runs (``socnav-wm sweep --study NAME``, ``dvc repro study_NAME``);
     no stage of the default pipeline reads them."""
 

@@ -10,22 +10,29 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 __all__ = [
+    "DEVICES",
     "SECTION_CONFIG",
+    "Device",
     "Section",
     "as_tuple",
     "describe_error",
     "describe_errors",
+    "distinct_non_negative",
     "finite",
     "non_negative",
     "one_line",
     "positive",
     "short_repr",
 ]
+
+Device = Literal["auto", "cpu", "cuda"]
+"""Where a network runs: ``auto`` uses CUDA when available, else the CPU."""
+DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 
 # Numbers are strict: YAML already types them, so `batch_size: 512.0` or `seed: true` is a slip
 # worth reporting rather than silently coercing (an int is accepted where a float is expected).
@@ -210,3 +217,12 @@ def non_negative(default: float) -> Any:
 def as_tuple(value: Any) -> Any:
     """A YAML list as a tuple (a ``BeforeValidator``), so that the frozen section stays hashable."""
     return tuple(value) if isinstance(value, list) else value
+
+
+def distinct_non_negative(value: list[int]) -> list[int]:
+    """``value`` (seeds) if none is negative and none is listed twice, else a ValueError."""
+    if any(seed < 0 for seed in value):
+        raise ValueError(f"must be non-negative, got {value}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"a seed is listed twice in {value}")
+    return value

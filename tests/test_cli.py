@@ -194,3 +194,75 @@ def test_train_planning_model_names_missing_rollouts(tmp_path: Path) -> None:
     )  # fmt: skip
     assert result.exit_code != 0
     assert "none" in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize(
+    ("missing", "argv"),
+    [
+        ("typer", ["--help"]),
+        ("torch", ["bench", "train", "--variant", "maspm", "--seconds", "0.1"]),
+    ],
+)
+def test_without_the_pipeline_extra_the_command_says_how_to_install_it(
+    missing: str, argv: list[str]
+) -> None:
+    """A core install (no `pipeline` extra): one line on stderr naming the extra, exit status 2,
+    whether typer itself is missing or a module a command imports."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        f"sys.modules[{missing!r}] = None  # as if it were not installed\n"
+        f"sys.argv = ['socnav-wm', *{argv!r}]\n"
+        "from socnav_wm.cli import main\n"
+        "main()\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stderr == (
+        "socnav-wm: the command line needs the pipeline extra: pip install 'socnav-wm[pipeline]'\n"
+    )
+    assert result.stdout == ""
+
+
+def test_the_cli_package_imports_only_the_standard_library_before_typer() -> None:
+    """`socnav_wm.cli` (the console script's module) runs without typer: only `main` needs it."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; before = set(sys.modules)\n"
+        "import socnav_wm.cli\n"
+        "new = {m.partition('.')[0] for m in set(sys.modules) - before}\n"
+        "print(sorted(new & {'typer', 'click', 'rich', 'yaml', 'torch'}))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.stdout.strip() == "[]", result.stdout + result.stderr
+
+
+def test_render_keeps_the_params_files_human_policy_unless_told(tmp_path: Path) -> None:
+    """`--human-policy` overrides `env.human_policy` only when given."""
+    from socnav_wm.env import render as drawing
+
+    seen = []
+    original = drawing.episode_frames
+
+    def spy(episode, params, **kwargs):
+        seen.append(params.human_policy)
+        return original(episode, params, **kwargs)
+
+    params = tmp_path / "params.yaml"
+    params.write_text("env:\n  human_policy: sfm\n")
+    common = ["render", "--episodes", "1", "--size", "64", "--params", str(params)]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(drawing, "episode_frames", spy)
+        kept = runner.invoke(app, [*common, "--out", str(tmp_path / "a.gif")])
+        given = runner.invoke(
+            app, [*common, "--out", str(tmp_path / "b.gif"), "--human-policy", "orca"]
+        )
+    assert kept.exit_code == 0 and given.exit_code == 0, kept.output + given.output
+    assert seen == ["sfm", "orca"]

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -70,7 +73,8 @@ def test_the_closure_follows_imports_inside_functions_and_packages() -> None:
     for stage, files in deps.items():
         own = STAGE_MODULES[stage].replace(".", "/") + ".py"
         assert "socnav_wm/__init__.py" in files and own in files, stage
-        assert "socnav_wm/cli.py" not in files and "socnav_wm/tracking.py" not in files
+        assert not [f for f in files if f.startswith("socnav_wm/cli/")], stage
+        assert "socnav_wm/tracking.py" not in files
     # A stage does not depend on what it never runs.
     assert "socnav_wm/evaluation/figures.py" not in deps["train_agent"]
     assert "socnav_wm/agents/learner.py" not in deps["collect"]
@@ -80,7 +84,7 @@ def test_the_closure_follows_imports_inside_functions_and_packages() -> None:
 def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> None:
     text = (ROOT / "dvc.yaml").read_text()
     broken = text.replace("      - socnav_wm/env/reward.py\n", "", 1).replace(
-        "      - socnav_wm/io.py\n", "      - socnav_wm/io.py\n      - socnav_wm/cli.py\n", 1
+        "      - socnav_wm/io.py\n", "      - socnav_wm/io.py\n      - socnav_wm/cli/stages.py\n", 1
     )
     target = tmp_path / "dvc.yaml"
     target.write_text(broken)
@@ -94,14 +98,50 @@ def test_write_brings_the_lists_back_and_keeps_the_data_deps(tmp_path: Path) -> 
 def test_predict_measures_every_planning_model_seed() -> None:
     """The stage names no seed: it reads planning_model.seeds (a param of the stage) and the
     folder that holds every seed's model (a dependency), so a change of the seeds reruns it."""
-    from socnav_wm.stages.train_planning_model import model_path
+    from socnav_wm.layout import LAYOUT
 
     stages = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
     stage = stages["predict"]
     assert "--planning-model" not in stage["cmd"]
     assert "planning_model.seeds" in stage["params"] and "prediction" in stage["params"]
-    folder = model_path(0).parent.as_posix()
+    folder = LAYOUT.planning_dir.as_posix()
     assert folder in stage["deps"]
     writer = stages["train_planning_model"]["do"]["outs"]
     assert all(Path(out if isinstance(out, str) else next(iter(out))).parent.as_posix() == folder
                for out in writer)  # fmt: skip
+
+
+def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: Path) -> None:
+    """Real `dvc status` in a copy of the repository: after an edit of the renderer, only the
+    stages that draw are stale; of the robot controllers, only the robots' evaluations; of the
+    reward, every stage that runs the simulator."""
+    from tests.test_dvc import _dvc, _project_files
+
+    copy = tmp_path / "repo"
+    for name in _project_files():
+        (copy / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / name, copy / name)
+    git = ["git", "-c", "user.name=test", "-c", "user.email=test@example.com"]
+    subprocess.run([*git, "init", "-q"], cwd=copy, check=True)
+    subprocess.run([*git, "add", "-A"], cwd=copy, check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "copy"], cwd=copy, check=True)
+    edited = ("socnav_wm/env/render.py", "socnav_wm/agents/baselines.py", "socnav_wm/env/reward.py")
+    for name in edited:
+        with (copy / name).open("a", encoding="utf-8") as handle:
+            handle.write("\n# an edit\n")
+    status = json.loads(_dvc(copy, "status", "--json"))
+    stale = {name: set() for name in edited}
+    for stage, changes in status.items():
+        for change in changes:
+            for name in (change.get("changed deps") or {}) if isinstance(change, dict) else ():
+                if name in stale:
+                    stale[name].add(stage.removeprefix("dvc.yaml:"))
+    assert stale["socnav_wm/env/render.py"] == {"report"}
+    assert stale["socnav_wm/agents/baselines.py"] == {
+        "evaluate_baseline@orca",
+        "evaluate_baseline@sfm",
+    }
+    runs_the_simulator = {"collect", "evaluate_baseline@orca", "evaluate_planner@cv-mpc"}
+    agents = {stage for stage in status if stage.startswith("train_agent@")}
+    assert agents and runs_the_simulator | agents <= stale["socnav_wm/env/reward.py"]
+    assert not {"train_vae", "train_lstm"} & stale["socnav_wm/env/reward.py"]

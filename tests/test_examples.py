@@ -57,7 +57,8 @@ def test_run_agent_loads_a_trained_agent_and_matches_the_evaluation(tiny, capsys
     torch.set_num_threads(1)
     try:
         train_agent.run(
-            params, variant="dueling-dqn", seed=0, out_dir=folder / "agents",
+            params, variant="dueling-dqn", seed=0, vae=folder / "vae.pt", lstm=folder / "lstm.pt",
+            out_dir=folder / "agents",
             log_dir=folder / "training", metrics_dir=folder / "metrics",
             checkpoint_dir=folder / "checkpoints", tracking=False,
         )  # fmt: skip

@@ -66,7 +66,7 @@ def test_collect_vae_lstm_write_every_output_and_mlflow_runs(workdir: Path) -> N
     import mlflow.pytorch
     from mlflow.models import get_model_info
 
-    from socnav_wm.worldmodel.training import load_lstm, load_vae
+    from socnav_wm.worldmodel.files import load_lstm, load_vae
 
     lstm_run = next(run for run in runs if run.data.tags["stage"] == "train-lstm")
     for run, inputs, outputs in (

@@ -23,19 +23,19 @@ from typer.testing import CliRunner
 from socnav_wm.agents.params import VARIANT_NAMES
 from socnav_wm.cli import app
 from socnav_wm.config import ConfigError, StudyParams, load_params
-from socnav_wm.sweep import (
+from socnav_wm.studies import (
     SweepResult,
-    _interval,
     horizon_verdict,
     parse_grid,
     parse_seeds,
     plan_sweep,
     run_sources,
+    seed_interval,
     study_from_options,
     training_claims,
     write_results,
 )
-from socnav_wm.worldmodel.training import save_lstm, save_vae
+from socnav_wm.worldmodel.files import save_lstm, save_vae
 from tests.agents.conftest import tiny_world_model
 from tests.conftest import tiny_params
 
@@ -82,13 +82,13 @@ def test_seeds_and_grid_parse_like_the_command_line() -> None:
 
 
 def test_intervals_over_seeds_stay_in_the_metric_range() -> None:
-    mean, low, high = _interval([0.0, 1.0], "success")
+    mean, low, high = seed_interval([0.0, 1.0], "success")
     assert (mean, low, high) == (0.5, 0.0, 1.0)  # the t interval itself is far wider
-    mean, low, high = _interval([10.0, 11.0, 12.0], "discomfort")  # t(0.975, 2) = 4.3027
+    mean, low, high = seed_interval([10.0, 11.0, 12.0], "discomfort")  # t(0.975, 2) = 4.3027
     assert (low, high) == pytest.approx((11 - 4.302653 / 3**0.5, 11 + 4.302653 / 3**0.5))
-    assert _interval([10.0, 30.0], "discomfort")[1] == 0.0  # never below zero
-    assert _interval([3.0, 3.0], "train_cpu_s") == (3.0, 3.0, 3.0)
-    assert all(math.isnan(bound) for bound in _interval([0.5], "success")[1:])  # one seed
+    assert seed_interval([10.0, 30.0], "discomfort")[1] == 0.0  # never below zero
+    assert seed_interval([3.0, 3.0], "train_cpu_s") == (3.0, 3.0, 3.0)
+    assert all(math.isnan(bound) for bound in seed_interval([0.5], "success")[1:])  # one seed
 
 
 def test_the_horizon_claim_is_checked_on_paired_seeds(sweepdir: Path) -> None:
@@ -271,14 +271,17 @@ def test_an_edit_of_the_code_a_run_executes_makes_its_result_stale(
 
     sources = run_sources()
     assert "socnav_wm/env/reward.py" in sources and "socnav_wm/agents/learner.py" in sources
-    assert "socnav_wm/sweep.py" not in sources and "socnav_wm/stages/report.py" not in sources
-    assert "socnav_wm/config.py" not in sources  # it acts through the parameters, fingerprinted
+    assert "socnav_wm/studies/runner.py" not in sources
+    assert "socnav_wm/stages/report.py" not in sources
+    # The configuration acts through the parameters, fingerprinted themselves.
+    assert "socnav_wm/config.py" not in sources and "socnav_wm/studies/params.py" not in sources
     copy = tmp_path / "src" / "socnav_wm"
     shutil.copytree(deps.PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
     monkeypatch.setattr(deps, "PACKAGE_ROOT", copy)
     study = StudyParams(variants=["dueling-dqn", "maspm"], seeds=[0, 1])
     before = plan_sweep("s", study).fingerprints
-    for outside in ("sweep.py", "stages/report.py"):  # code no run executes
+    # Code no run executes, or only through the parameters.
+    for outside in ("studies/runner.py", "studies/params.py", "stages/report.py"):
         (copy / outside).write_text((copy / outside).read_text() + "# an edit\n")
     assert plan_sweep("s", study).fingerprints == before
     (copy / "env" / "reward.py").write_text((copy / "env" / "reward.py").read_text() + "# x\n")
@@ -316,7 +319,7 @@ def test_without_ray_a_sweep_fails_in_one_line(
 
 
 def test_other_commands_do_not_import_ray() -> None:
-    code = "import sys, socnav_wm.cli, socnav_wm.sweep; print('ray' in sys.modules)"
+    code = "import sys, socnav_wm.cli, socnav_wm.studies.runner; print('ray' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

@@ -13,14 +13,13 @@ the configuration does) does not pay for importing torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from socnav_wm.exports import lazy_exports
 
 _EXPORTS = {
     "AgentParams": "socnav_wm.agents.params",
     "VARIANT_NAMES": "socnav_wm.agents.params",
     "Agent": "socnav_wm.agents.agent_file",
-    "TrainResult": "socnav_wm.agents.training",
+    "TrainResult": "socnav_wm.agents.agent_file",
     "greedy_episodes": "socnav_wm.agents.agent_file",
     "load_agent": "socnav_wm.agents.agent_file",
     "save_agent": "socnav_wm.agents.agent_file",
@@ -31,8 +30,4 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'socnav_wm.agents' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
@@ -19,18 +19,58 @@ import torch
 from socnav_wm.agents.dueling import DuelingQNetwork
 from socnav_wm.agents.features import VARIANTS, Variant, make_variant
 from socnav_wm.agents.params import AgentParams, check_variant
+from socnav_wm.devices import resolve_device
+from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
-from socnav_wm.env.rollout import Episode, run_episodes
+from socnav_wm.env.rollout import run_episodes
 from socnav_wm.io import atomic_path, first_line, load_saved
+from socnav_wm.worldmodel.files import load_lstm, load_vae
 from socnav_wm.worldmodel.lstm import LatentLSTM
-from socnav_wm.worldmodel.training import load_lstm, load_vae, resolve_device
 from socnav_wm.worldmodel.vae import VAE
-
-if TYPE_CHECKING:
-    from socnav_wm.agents.training import TrainResult
 
 AGENT_FORMAT = "socnav-wm-agent"
 AGENT_FORMAT_VERSION = 1
+
+
+@dataclass
+class TrainResult:
+    """Outcome of :func:`socnav_wm.agents.training.train_agent`.
+
+    Attributes:
+        q_network: the trained online network (eval mode; the selected weights).
+        variant: the variant's name.
+        params: the resolved hyper-parameters (``agent.per_variant`` applied).
+        env_params: the training scenario parameters.
+        seed: the run's seed.
+        episodes: one row per training episode (keys :data:`EPISODE_COLUMNS`): ``episode``
+            (1-based), ``return`` (sum of env rewards), ``length`` (steps), ``success``,
+            ``collision`` (any), ``human_collision``, ``wall_collision``, ``timeout``,
+            ``epsilon`` (ε while it ran), ``env_steps`` and ``updates`` (totals when it ended),
+            ``wall_time`` (s since the start of training, resumed runs included).
+        episodes_to_solve: see :func:`episodes_to_solve`; None if never reached.
+        env_steps, updates: totals over the run.
+        wall_time: seconds of training (over all sessions of a resumed run).
+        vae, lstm: the frozen world model (None for ``dueling-dqn``), saved with the agent.
+        selection: with ``select_every`` > 0, one ``{"episode", "success_rate"}`` per greedy run
+            on the selection scenarios; empty otherwise.
+        selected_episode: the episode after which ``q_network``'s weights were taken (the best
+            greedy run, ties to the later); None without selection (the final weights).
+    """
+
+    q_network: torch.nn.Module
+    variant: str
+    params: AgentParams
+    env_params: EnvParams
+    seed: int
+    episodes: list[dict[str, Any]]
+    episodes_to_solve: int | None
+    env_steps: int
+    updates: int
+    wall_time: float
+    vae: VAE | None = None
+    lstm: LatentLSTM | None = None
+    selection: list[dict[str, Any]] = field(default_factory=list)
+    selected_episode: int | None = None
 
 
 class AgentFileError(ValueError):

@@ -1,5 +1,7 @@
 """Hyper-parameters of the DQN agents and the variant names: a light module (no torch).
 
+Every method's name (agents, baselines, planners) is in :mod:`socnav_wm.method_names`.
+
 ``params.yaml``'s ``agent`` section is validated into :class:`AgentParams` by
 :mod:`socnav_wm.config`, and the library uses the same class, so both share one definition and
 one set of one-line errors. Keeping it free of torch lets the CLI validate a configuration (and
@@ -14,10 +16,9 @@ from __future__ import annotations
 
 from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import AfterValidator, BeforeValidator, Field, model_validator
+from pydantic import AfterValidator, BeforeValidator, Field, field_validator, model_validator
 
-from socnav_wm.planning.params import PLANNER_NAMES
-from socnav_wm.section import Section, as_tuple
+from socnav_wm.section import Device, Section, as_tuple, distinct_non_negative
 
 VARIANT_NAMES: tuple[str, ...] = (
     "dueling-dqn",
@@ -31,17 +32,6 @@ VARIANT_NAMES: tuple[str, ...] = (
 WORLD_MODEL_VARIANTS: tuple[str, ...] = VARIANT_NAMES[1:]
 """The variants that need the frozen VAE and LSTM."""
 
-BASELINE_NAMES: tuple[str, ...] = ("orca", "sfm")
-"""The two classic controllers evaluated next to the agents (:mod:`socnav_wm.agents.baselines`)."""
-
-PAPER_METHOD_NAMES: tuple[str, ...] = (*VARIANT_NAMES, *BASELINE_NAMES)
-"""The paper's seven methods: the agents (paper order), then the baselines."""
-
-METHOD_NAMES: tuple[str, ...] = (*PAPER_METHOD_NAMES, *PLANNER_NAMES)
-"""Every evaluated method: the paper's seven, then the planners
-(:mod:`socnav_wm.planning`). Listed here, in a module without torch, so that the configuration
-can check method names cheaply."""
-
 
 def check_variant(name: str) -> str:
     """``name`` if it is a known variant, else a one-line ValueError listing the valid names."""
@@ -51,10 +41,8 @@ def check_variant(name: str) -> str:
 
 
 Optimizer = Literal["adam", "adamw"]
-DeviceName = Literal["auto", "cpu", "cuda"]
 
 OPTIMIZERS: tuple[str, ...] = ("adam", "adamw")
-DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 
 
 def _in_unit(value: float) -> float:
@@ -171,7 +159,7 @@ class AgentParams(Section):
     weights (the paper's way)."""
     select_episodes: int = Field(500, gt=0)
     """Selection scenarios of each of those greedy runs."""
-    device: DeviceName = "auto"
+    device: Device = "auto"
     """`auto` uses CUDA when available, else the CPU."""
     per_variant: dict[str, dict[str, Any]] = Field(default_factory=dict)
     """Per-variant overrides of the fields above, e.g. `maspm: {gamma: 0.98}` (empty: every
@@ -205,3 +193,34 @@ class AgentParams(Section):
         (and ``per_variant`` emptied); ``self`` itself when ``per_variant`` is empty."""
         check_variant(variant)
         return self._overridden("per_variant", variant)
+
+
+def known_distinct_variants(value: list[str]) -> list[str]:
+    """``value`` if every name is a variant and none is listed twice, else a ValueError."""
+    for name in value:
+        if name not in VARIANT_NAMES:
+            raise ValueError(f"unknown {name!r}; expected some of {', '.join(VARIANT_NAMES)}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"a variant is listed twice in {value}")
+    return value
+
+
+class ExperimentParams(Section):
+    """Which agents the pipeline trains: every variant × every seed (``dvc.yaml``'s matrix)."""
+
+    SECTION: ClassVar[str] = "experiment"
+
+    variants: list[str] = Field(default_factory=lambda: list(VARIANT_NAMES), min_length=1)
+    """Agent variants to train and evaluate (socnav_wm/agents/params.py lists them)."""
+    seeds: list[int] = Field(default_factory=lambda: [0, 1, 2], min_length=1)
+    """Training seeds of every variant; results are reported over seeds and scenarios."""
+
+    @field_validator("variants")
+    @classmethod
+    def _known_variants(cls, value: list[str]) -> list[str]:
+        return known_distinct_variants(value)
+
+    @field_validator("seeds")
+    @classmethod
+    def _distinct_seeds(cls, value: list[int]) -> list[int]:
+        return distinct_non_negative(value)

@@ -41,7 +41,13 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from socnav_wm.agents.agent_file import Agent, greedy_episodes, load_world_model, variant_for
+from socnav_wm.agents.agent_file import (
+    Agent,
+    TrainResult,
+    greedy_episodes,
+    load_world_model,
+    variant_for,
+)
 from socnav_wm.agents.checkpoint import (
     UnreadableCheckpoint,
     load_checkpoint,
@@ -53,17 +59,16 @@ from socnav_wm.agents.features import Variant
 from socnav_wm.agents.learner import DQNLearner
 from socnav_wm.agents.params import AgentParams, check_variant
 from socnav_wm.agents.replay import NStepAccumulator, ReplayBuffer
+from socnav_wm.devices import resolve_device
 from socnav_wm.env.core import Simulator, StepResult
+from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
-from socnav_wm.env.rollout import Episode
 from socnav_wm.env.state import COLLISION_HUMAN, COLLISION_WALL, BatchState
 from socnav_wm.env.wrappers import goal_distance, progress_shaping
 from socnav_wm.io import atomic_path
+from socnav_wm.metrics import episodes_to_solve
 from socnav_wm.progress import progress
 from socnav_wm.resources import check_fits
-from socnav_wm.worldmodel.lstm import LatentLSTM
-from socnav_wm.worldmodel.training import resolve_device
-from socnav_wm.worldmodel.vae import VAE
 
 EpisodeCallback = Callable[[list[dict[str, Any]]], None]
 """Receives the rows of the episodes that finished in the last vector step."""
@@ -110,21 +115,6 @@ def selection_seed(seed: int) -> int:
 # -- small pure helpers -----------------------------------------------------------------------
 
 
-def episodes_to_solve(success: Sequence[bool] | np.ndarray, window: int, rate: float) -> int | None:
-    """First episode (1-based) at which the mean success of the last ``window`` episodes
-    reaches ``rate``; None if it never does. Needs ``window`` complete episodes.
-
-    The paper's "solved in about 3200 episodes" is never defined (paper_spec §8.18); this is the
-    project's definition.
-    """
-    s = np.asarray(success, dtype=np.float64)
-    if s.size < window:
-        return None
-    rolling = np.convolve(s, np.ones(window), mode="valid") / window  # rolling[i] ends at i+window
-    hits = np.flatnonzero(rolling >= rate - 1e-12)
-    return int(hits[0] + window) if hits.size else None
-
-
 def best_selection_run(selection: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
     """The model selection's greedy run whose weights are kept: the highest success rate, the
     later run on ties; None before any run."""
@@ -161,10 +151,7 @@ def step_and_restart(sim: Simulator, features_of: Variant, actions: np.ndarray) 
     result = sim.step(actions)
     done = result.terminated | result.truncated
     finished_scenarios = sim.state.scenario_id[done].copy()
-    reset_obs = None
-    if done.any():
-        sim.reset_envs(done)
-        reset_obs = sim.observation[done]
+    reset_obs = sim.autoreset(done)[done] if done.any() else None
     next_features, features = features_of.step(
         result.obs, actions, reset_mask=done, reset_obs=reset_obs
     )
@@ -261,47 +248,6 @@ class TrainState:
         self.selection = list(state["selection"])
         best = state["best_weights"]
         self.best_weights = None if best is None else {k: v.to(device) for k, v in best.items()}
-
-
-@dataclass
-class TrainResult:
-    """Outcome of :func:`train_agent`.
-
-    Attributes:
-        q_network: the trained online network (eval mode; the selected weights).
-        variant: the variant's name.
-        params: the resolved hyper-parameters (``agent.per_variant`` applied).
-        env_params: the training scenario parameters.
-        seed: the run's seed.
-        episodes: one row per training episode (keys :data:`EPISODE_COLUMNS`): ``episode``
-            (1-based), ``return`` (sum of env rewards), ``length`` (steps), ``success``,
-            ``collision`` (any), ``human_collision``, ``wall_collision``, ``timeout``,
-            ``epsilon`` (ε while it ran), ``env_steps`` and ``updates`` (totals when it ended),
-            ``wall_time`` (s since the start of training, resumed runs included).
-        episodes_to_solve: see :func:`episodes_to_solve`; None if never reached.
-        env_steps, updates: totals over the run.
-        wall_time: seconds of training (over all sessions of a resumed run).
-        vae, lstm: the frozen world model (None for ``dueling-dqn``), saved with the agent.
-        selection: with ``select_every`` > 0, one ``{"episode", "success_rate"}`` per greedy run
-            on the selection scenarios; empty otherwise.
-        selected_episode: the episode after which ``q_network``'s weights were taken (the best
-            greedy run, ties to the later); None without selection (the final weights).
-    """
-
-    q_network: torch.nn.Module
-    variant: str
-    params: AgentParams
-    env_params: EnvParams
-    seed: int
-    episodes: list[dict[str, Any]]
-    episodes_to_solve: int | None
-    env_steps: int
-    updates: int
-    wall_time: float
-    vae: VAE | None = None
-    lstm: LatentLSTM | None = None
-    selection: list[dict[str, Any]] = field(default_factory=list)
-    selected_episode: int | None = None
 
 
 def _episode_rows(

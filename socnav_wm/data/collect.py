@@ -177,10 +177,7 @@ def collect_rollouts(
             if len(ended) and on_episodes is not None:
                 on_episodes(len(ended))
             # Hand out new scenarios only while the dataset still needs episodes.
-            remaining = episodes - sim.next_scenario
-            if remaining > 0 and len(ended):
-                sim.reset_envs(ended[:remaining])
-            obs = sim.observation
+            obs = sim.autoreset(ended, limit=episodes - sim.next_scenario)
             if buffers.done_rows >= WRITE_EVERY_ROWS:
                 writer.write(buffers.drain())
         if buffers.done:

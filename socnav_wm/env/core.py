@@ -188,6 +188,20 @@ class Simulator:
         self._reset_slots(envs, scenario_ids)
         self.next_scenario = max(self.next_scenario, int(np.max(scenario_ids)) + 1)
 
+    def autoreset(self, ended: np.ndarray, limit: int | None = None) -> np.ndarray:
+        """Same-step autoreset, the one for every batched loop (the vector env, collection,
+        training, the benchmarks): give the slots whose episode ended (``ended``: a mask or
+        indices) the seed's next scenarios, only the first ``limit`` of them when a limit is
+        given (collection hands out no more scenarios than it needs), and return the
+        observations to act on next: the new episodes' first ones where a slot restarted."""
+        envs = np.asarray(ended)
+        if envs.dtype == bool:
+            envs = np.flatnonzero(envs)
+        if limit is not None:
+            envs = envs[: max(limit, 0)]
+        self.reset_envs(envs)
+        return self.observation
+
     def _reset_slots(self, envs: np.ndarray, scenario_ids: np.ndarray) -> None:
         envs = np.ascontiguousarray(envs, dtype=np.int64)
         ids = np.asarray(scenario_ids)

@@ -19,7 +19,6 @@ from socnav_wm.env.core import MAX_SCENARIO_ID, NUM_ACTIONS, Simulator, StepResu
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_NAMES
 
-ENV_ID = "SocNav-v0"
 ACTION_TYPES = ("discrete", "continuous")
 
 
@@ -234,8 +233,7 @@ class SocNavVectorEnv(VectorEnv):
             info["final_info"] = dict(info)
             info["final_obs"] = obs
             info["_final_obs"] = ended
-            self.sim.reset_envs(ended)
-            obs = self.sim.observation
+            obs = self.sim.autoreset(ended)
             info.update(self.sim.info())
         return obs, result.reward, result.terminated, result.truncated, info
 
@@ -246,21 +244,3 @@ class SocNavVectorEnv(VectorEnv):
 
         frames = [render_frame(scene_of(self.sim, e)) for e in range(min(self.num_envs, 16))]
         return tile_frames(frames, columns=4)
-
-
-def register() -> None:
-    """Register ``SocNav-v0`` (idempotent).
-
-    Done on ``import socnav_wm.env`` and by gymnasium itself at import, through the
-    ``gymnasium.envs`` entry point in pyproject.toml. ``max_episode_steps`` is the env's own
-    ``max_steps``: ``gym.make`` adds a ``TimeLimit`` that fires on the same step as the env's
-    truncation (pass ``max_episode_steps`` along with a non-default ``max_steps``).
-    """
-    if ENV_ID in gym.registry:
-        return
-    gym.register(
-        id=ENV_ID,
-        entry_point="socnav_wm.env.gym:SocNavEnv",
-        vector_entry_point="socnav_wm.env.gym:SocNavVectorEnv",
-        max_episode_steps=EnvParams().max_steps,
-    )

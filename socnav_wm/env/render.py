@@ -27,6 +27,8 @@ from functools import lru_cache
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from socnav_wm.env.episode import Episode
+from socnav_wm.env.params import EnvParams
 from socnav_wm.io import atomic_path
 
 __all__ = [
@@ -423,3 +425,42 @@ def tile_frames(frames: Sequence[np.ndarray], columns: int) -> np.ndarray:
         r, c = divmod(i, cols)
         grid[r * h : (r + 1) * h, c * w : (c + 1) * w] = frame
     return grid
+
+
+def episode_frames(
+    episode: Episode, params: EnvParams, *, label: str = "", size: int = 480
+) -> list[np.ndarray]:
+    """RGB frames (size, size, 3) of every state of an episode, with its trail and a caption."""
+    outcome = (
+        "success"
+        if episode.success
+        else f"{episode.collision} collision"
+        if episode.collision
+        else "timeout"
+    )
+    frames = []
+    for t in range(episode.num_steps + 1):
+        status = outcome if t == episode.num_steps else ""
+        title = f"{label} scenario {episode.scenario_id}  step {t}  {status}".strip()
+        scene = episode_scene(episode, t, params, title)
+        frames.append(render_frame(scene, size=size))
+    return frames
+
+
+def episode_scene(episode: Episode, t: int, params: EnvParams, title: str = "") -> Scene:
+    """The :class:`Scene` of state ``t`` of a recorded episode, with the trail so far."""
+    return Scene(
+        robot_xy=episode.robot_xy[t],
+        robot_theta=float(episode.robot_theta[t]),
+        robot_radius=params.robot_radius,
+        goal_xy=episode.goal_xy,
+        goal_radius=params.goal_radius,
+        human_xy=episode.human_xy[t],
+        human_theta=episode.human_theta[t],
+        human_radius=params.human_radius,
+        personal_space=0.5,
+        room_half_size=params.wall_half_size,
+        wall_thickness=params.wall_thickness,
+        robot_trail=episode.robot_xy[: t + 1],
+        title=title,
+    )

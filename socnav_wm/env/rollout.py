@@ -11,11 +11,11 @@ slot, so slot ``i`` holds scenario ``scenario_ids[i]`` from start to end.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
 from socnav_wm.env.core import NUM_ACTIONS, Simulator
+from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_NAMES
 
@@ -34,31 +34,6 @@ def random_policy(seed: int) -> Policy:
         return rng.integers(0, NUM_ACTIONS, size=obs.shape[0])
 
     return act
-
-
-@dataclass(frozen=True)
-class Episode:
-    """One recorded episode; index ``t`` of the ``(T+1, …)`` arrays is the state after step t."""
-
-    scenario_id: int
-    robot_xy: np.ndarray  # (T+1, 2) m
-    robot_theta: np.ndarray  # (T+1,) rad
-    goal_xy: np.ndarray  # (2,) m
-    human_xy: np.ndarray  # (T+1, H, 2) m
-    human_theta: np.ndarray  # (T+1, H) rad
-    actions: np.ndarray  # (T,) or (T, 2): what the policy returned
-    rewards: np.ndarray  # (T,)
-    dmin: np.ndarray  # (T,) m
-    success: bool
-    collision: str | None  # "human", "wall" or None
-    truncated: bool
-    commands: np.ndarray | None = None
-    """(T, 2) the (v m/s, ω rad/s) the robot executed at each step (discrete actions looked
-    up, continuous commands clipped to the robot's limits); None when not recorded."""
-
-    @property
-    def num_steps(self) -> int:
-        return int(self.rewards.shape[0])
 
 
 def run_episodes(
@@ -130,46 +105,3 @@ def run_episodes(
             )
         )
     return episodes
-
-
-def episode_frames(
-    episode: Episode, params: EnvParams, *, label: str = "", size: int = 480
-) -> list[np.ndarray]:
-    """RGB frames (size, size, 3) of every state of an episode, with its trail and a caption."""
-    from socnav_wm.env.render import render_frame
-
-    outcome = (
-        "success"
-        if episode.success
-        else f"{episode.collision} collision"
-        if episode.collision
-        else "timeout"
-    )
-    frames = []
-    for t in range(episode.num_steps + 1):
-        status = outcome if t == episode.num_steps else ""
-        title = f"{label} scenario {episode.scenario_id}  step {t}  {status}".strip()
-        scene = episode_scene(episode, t, params, title)
-        frames.append(render_frame(scene, size=size))
-    return frames
-
-
-def episode_scene(episode: Episode, t: int, params: EnvParams, title: str = ""):
-    """The ``render.Scene`` of state ``t`` of a recorded episode, with the trail so far."""
-    from socnav_wm.env.render import Scene
-
-    return Scene(
-        robot_xy=episode.robot_xy[t],
-        robot_theta=float(episode.robot_theta[t]),
-        robot_radius=params.robot_radius,
-        goal_xy=episode.goal_xy,
-        goal_radius=params.goal_radius,
-        human_xy=episode.human_xy[t],
-        human_theta=episode.human_theta[t],
-        human_radius=params.human_radius,
-        personal_space=0.5,
-        room_half_size=params.wall_half_size,
-        wall_thickness=params.wall_thickness,
-        robot_trail=episode.robot_xy[: t + 1],
-        title=title,
-    )

@@ -9,7 +9,7 @@ same functions on its batched simulator).
   simulator lists them in spawn order).
 
 >>> import gymnasium as gym
->>> env = NearestHumansFirst(ProgressReward(gym.make("socnav_wm.env:SocNav-v0"), weight=1.0))
+>>> env = NearestHumansFirst(ProgressReward(gym.make("socnav_wm:SocNav-v0"), weight=1.0))
 """
 
 from __future__ import annotations

@@ -20,20 +20,18 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from scipy import stats as scipy_stats
 
 from socnav_wm.evaluation import paper
 from socnav_wm.evaluation.comparisons import compare, pareto_analysis
-from socnav_wm.evaluation.evaluate import PAPER_METHODS
-from socnav_wm.evaluation.rendering import fmt_p, fmt_value
+from socnav_wm.evaluation.formatting import fmt_p, fmt_value
+from socnav_wm.evaluation.results import MethodEvaluation
 from socnav_wm.evaluation.stats import holm
+from socnav_wm.method_names import PAPER_METHOD_NAMES
 from socnav_wm.metrics import METRIC_DIRECTIONS
-
-if TYPE_CHECKING:
-    from socnav_wm.evaluation.report import MethodEvaluation
 
 __all__ = ["VERDICTS", "ClaimCheck", "ClaimResult", "check_claims"]
 
@@ -156,15 +154,15 @@ def check_claims(
     Args:
         evaluations: the evaluated methods.
         means: method → metric → mean (the table's means).
-        training: :func:`~socnav_wm.evaluation.report.training_summary` of the training
+        training: :func:`~socnav_wm.evaluation.results.training_summary` of the training
             logs.
         claims: the claims to check.
         alpha: family-wise error rate of each claim's tests (Holm within the claim).
     """
     # The paper's claims are about its seven methods: others (the planners) do not enter its
     # comparisons, Pareto fronts and ranks.
-    evaluations = {m: e for m, e in evaluations.items() if m in PAPER_METHODS}
-    means = {m: v for m, v in means.items() if m in PAPER_METHODS}
+    evaluations = {m: e for m, e in evaluations.items() if m in PAPER_METHOD_NAMES}
+    means = {m: v for m, v in means.items() if m in PAPER_METHOD_NAMES}
     results: list[ClaimResult] = []
     tested: list[ClaimCheck] = []  # the current claim's checks with a p-value: its Holm family
     per_seed: dict[int, tuple[list[float], list[float]]] = {}  # id(check) → a seeds check's values
@@ -259,7 +257,7 @@ def check_claims(
             result.checks.append(check)
         elif claim.kind == "rank":
             subject = claim.subjects[0]
-            complete = all(m in means for m in PAPER_METHODS)
+            complete = all(m in means for m in PAPER_METHOD_NAMES)
             for metric, rank in claim.ranks:
                 check = ClaimCheck(subject, "all seven", metric)
                 if complete:

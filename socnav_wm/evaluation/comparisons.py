@@ -30,25 +30,23 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 from scipy import stats as scipy_stats
 
+from socnav_wm.evaluation.intervals import mean_ci_clustered
+from socnav_wm.evaluation.results import MethodEvaluation
 from socnav_wm.evaluation.stats import (
     dominated_by,
     holm,
     mcnemar,
-    mean_ci_clustered,
     paired_proportion_difference,
     pareto_front,
     wilcoxon_signed_rank,
 )
 from socnav_wm.metrics import METRIC_DIRECTIONS, METRIC_UNITS, PAPER_METRICS
-
-if TYPE_CHECKING:
-    from socnav_wm.evaluation.report import MethodEvaluation
 
 __all__ = [
     "PairedComparison",

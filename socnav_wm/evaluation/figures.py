@@ -15,27 +15,17 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from socnav_wm.env.params import EnvParams
-from socnav_wm.env.render import render_frame, tile_frames, write_gif
-from socnav_wm.env.rollout import Episode, episode_scene
+from socnav_wm.evaluation.results import smooth
 from socnav_wm.io import atomic_path
 from socnav_wm.metrics import METRIC_UNITS
 
 __all__ = [
-    "DEFAULT_SMOOTHING_WINDOW",
     "METHOD_COLORS",
     "histograms_figure",
     "means_figure",
-    "scenario_frames",
-    "scenarios_gif",
-    "smooth",
     "training_curves_figure",
 ]
 
-DEFAULT_SMOOTHING_WINDOW = 200
-"""Episodes in the trailing rolling mean of the training curves. The paper's window is unknown
-(paper_spec §7); 200 of the default 6,000 training episodes smooths the ±1 episode returns into
-a readable curve while keeping the rise (a few hundred episodes wide) visible."""
 
 METHOD_COLORS: dict[str, str] = {
     "dueling-dqn": "#1f77b4",
@@ -69,34 +59,11 @@ def _save(figure: Figure, path: str | Path, dpi: int = 110) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def smooth(values: np.ndarray | Sequence[float], window: int) -> np.ndarray:
-    """Trailing rolling mean: entry ``i`` is the mean of ``values[max(0, i − window + 1) : i + 1]``.
-
-    The first ``window − 1`` entries average the episodes so far, so the curve starts at the
-    first episode, and the last entry is the mean of the final ``window`` episodes (the
-    plateau the report quotes).
-
-    Args:
-        values: (E,) one value per episode, in episode order.
-        window: episodes averaged (≥ 1).
-
-    Returns:
-        (E,) float64.
-    """
-    if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 1:
-        raise ValueError(f"window: expected a positive integer, got {window!r}")
-    x = np.asarray(values, dtype=np.float64)
-    cumulative = np.concatenate([[0.0], np.cumsum(x)])
-    end = np.arange(1, x.size + 1)
-    begin = np.maximum(0, end - window)
-    return (cumulative[end] - cumulative[begin]) / (end - begin)
-
-
 def training_curves_figure(
     returns: Mapping[str, Mapping[int, np.ndarray]],
     path: str | Path,
     *,
-    window: int = DEFAULT_SMOOTHING_WINDOW,
+    window: int,
     paper_plateaus: Mapping[str, float] | None = None,
 ) -> None:
     """Smoothed return per training episode, one line per variant (the paper's Fig. 6).
@@ -296,91 +263,3 @@ def prediction_figure(errors: Mapping[str, object], path: str | Path) -> None:
     figure.suptitle("Open-loop prediction error in the robot frame (mean and 95% interval)")
     figure.subplots_adjust(hspace=0.45)
     _save(figure, path)
-
-
-# --------------------------------------------------------------------------------------------
-# Animated scenarios
-# --------------------------------------------------------------------------------------------
-
-
-def _outcome_text(episode: Episode) -> str:
-    if episode.success:
-        return "success"
-    if episode.collision:
-        return f"{episode.collision} hit"
-    return "timeout"
-
-
-def scenario_frames(
-    episodes: Mapping[str, Episode],
-    params: EnvParams,
-    *,
-    size: int = 200,
-    columns: int = 4,
-    max_frames: int = 60,
-    hold: int = 6,
-) -> list[np.ndarray]:
-    """Frames of one scenario played by several methods at once, tiled in a grid.
-
-    Every cell shows one method's episode at the same time step; a method whose episode has
-    ended keeps showing its last state with its outcome. Long episodes are subsampled (every
-    ``stride``-th step, the last one always kept) to at most about ``max_frames`` frames.
-
-    Args:
-        episodes: method → its episode of the scenario (the same scenario id for all).
-        params: the scenario parameters (room, radii).
-        size: cell side, px.
-        columns: cells per row.
-        max_frames: frames before the final hold.
-        hold: extra copies of the final frame, so the outcome stays on screen.
-
-    Returns:
-        ``(rows·size, cols·size, 3)`` uint8 frames.
-    """
-    if not episodes:
-        raise ValueError("need at least one method's episode")
-    longest = max(e.num_steps for e in episodes.values())
-    stride = max(1, math.ceil((longest + 1) / max_frames))
-    times = list(range(0, longest + 1, stride))
-    if times[-1] != longest:
-        times.append(longest)
-    frames = []
-    for t in times:
-        cells = []
-        for method, episode in episodes.items():
-            step = min(t, episode.num_steps)
-            status = f" {_outcome_text(episode)}" if step == episode.num_steps else ""
-            title = f"{method} s{episode.scenario_id} t{step}{status}"
-            cells.append(render_frame(episode_scene(episode, step, params, title), size=size))
-        frames.append(tile_frames(cells, columns))
-    return frames + [frames[-1]] * hold
-
-
-def scenarios_gif(
-    scenarios: Sequence[Mapping[str, Episode]],
-    params: EnvParams,
-    path: str | Path,
-    *,
-    size: int = 200,
-    columns: int = 4,
-    max_frames: int = 60,
-    fps: float = 8.0,
-) -> None:
-    """An animated GIF of test scenarios, one after the other, every method side by side.
-
-    Args:
-        scenarios: per scenario, method → its episode of that scenario.
-        params: the scenario parameters.
-        path: the GIF to write (atomically).
-        size, columns, max_frames: see :func:`scenario_frames`.
-        fps: frames per second.
-    """
-    frames: list[np.ndarray] = []
-    for episodes in scenarios:
-        frames += scenario_frames(
-            episodes, params, size=size, columns=columns, max_frames=max_frames
-        )
-    if not frames:
-        raise ValueError("no scenario to draw")
-    # Every scenario has the same set of methods, so the tiles have the same shape.
-    write_gif(frames, path, fps=fps)

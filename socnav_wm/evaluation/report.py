@@ -18,7 +18,7 @@ and :mod:`~socnav_wm.evaluation.figures`.
 Statistics (see :mod:`socnav_wm.evaluation.stats` for the building blocks)
 ------------------------------------------------------------------------
 * **Table.** Mean of each metric over scenarios × training seeds with a 95% two-way bootstrap
-  interval (:func:`~socnav_wm.evaluation.evaluate.summarise`); per-seed means beside it.
+  interval (:func:`~socnav_wm.evaluation.records.summarise`); per-seed means beside it.
 * **Pairing, tests, multiple comparisons, Pareto:** see
   :mod:`~socnav_wm.evaluation.comparisons`.
 * **Claim verdicts:** see :mod:`~socnav_wm.evaluation.claims`.
@@ -36,217 +36,39 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from socnav_wm.agents.params import AgentParams
 from socnav_wm.env.params import EnvParams
 from socnav_wm.evaluation import paper
 from socnav_wm.evaluation.claims import check_claims
 from socnav_wm.evaluation.comparisons import compare_with_reference, pareto_analysis
-from socnav_wm.evaluation.evaluate import (
-    AGENT_METHODS,
-    METHODS,
-    episode_from_trajectories,
-    evaluation_metadata,
-    per_seed_means,
-    summarise,
-)
 from socnav_wm.evaluation.figures import (
-    DEFAULT_SMOOTHING_WINDOW,
     histograms_figure,
     means_figure,
-    scenarios_gif,
-    smooth,
     training_curves_figure,
 )
+from socnav_wm.evaluation.intervals import mean_ci_crossed
+from socnav_wm.evaluation.params import ReportParams
+from socnav_wm.evaluation.records import episode_from_trajectories, per_seed_means, summarise
 from socnav_wm.evaluation.rendering import (
     render_summary,
     replace_marked_block,
     report_content,
     results_table,
 )
-from socnav_wm.evaluation.stats import mean_ci_crossed
+from socnav_wm.evaluation.results import (
+    MethodEvaluation,
+    load_evaluations,
+    load_training_returns,
+    training_summary,
+)
+from socnav_wm.evaluation.scenes import scenarios_gif
 from socnav_wm.io import write_json_atomic, write_text_atomic
+from socnav_wm.method_names import METHOD_NAMES
 from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
 
-__all__ = [
-    "FIGURE_NAMES",
-    "MethodEvaluation",
-    "ReportResult",
-    "build_report",
-    "load_evaluations",
-    "load_training_returns",
-    "training_summary",
-]
+__all__ = ["FIGURE_NAMES", "ReportResult", "build_report"]
 
 FIGURE_NAMES = ("training_curves.png", "histograms.png", "means.png", "scenarios.gif")
 """The files :func:`build_report` may write under ``reports/figures/``."""
-
-
-# --------------------------------------------------------------------------------------------
-# Loading
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class MethodEvaluation:
-    """One method's evaluation files, read back.
-
-    Attributes:
-        method: the method's name.
-        episodes: its episodes table (one row per training seed × scenario).
-        metadata: the run identity stored in the file (scenario seed, env params, seeds).
-        trajectories_path: its trajectories file, None when it is missing.
-    """
-
-    method: str
-    episodes: pa.Table
-    metadata: dict[str, Any]
-    trajectories_path: Path | None
-
-    @property
-    def training_seeds(self) -> list[int]:
-        return sorted(set(self.episodes["training_seed"].to_pylist()))
-
-    @property
-    def is_agent(self) -> bool:
-        return self.method in AGENT_METHODS
-
-
-def load_evaluations(
-    eval_dir: str | Path,
-    methods: Sequence[str] = METHODS,
-    *,
-    scenario_seed: int | None = None,
-    env_params: EnvParams | None = None,
-) -> tuple[dict[str, MethodEvaluation], list[str]]:
-    """The evaluation files of ``methods`` found in ``eval_dir``, and the methods without one.
-
-    Paired comparisons need every method to have run the same scenarios, so all files must
-    share one scenario seed, number of scenarios and scenario parameters (and match
-    ``scenario_seed`` / ``env_params`` when given).
-
-    Raises:
-        ValueError: files made on different scenarios, or not evaluation files.
-    """
-    eval_dir = Path(eval_dir)
-    found: dict[str, MethodEvaluation] = {}
-    absent: list[str] = []
-    reference: tuple[str, dict[str, Any]] | None = None
-    for method in methods:
-        path = eval_dir / f"{method}.parquet"
-        if not path.is_file():
-            absent.append(method)
-            continue
-        metadata = evaluation_metadata(path)
-        identity = {
-            "scenario_seed": metadata["scenario_seed"],
-            "num_scenarios": metadata["num_scenarios"],
-            "env_params": metadata["env_params"],
-        }
-        expected = {}
-        if scenario_seed is not None:
-            expected["scenario_seed"] = int(scenario_seed)
-        if env_params is not None:
-            expected["env_params"] = env_params.to_dict()
-        for key, value in expected.items():
-            if identity[key] != value:
-                raise ValueError(
-                    f"{path}: evaluated with another {key} than the report's; "
-                    "re-run `socnav-wm evaluate`"
-                )
-        if reference is None:
-            reference = (method, identity)
-        elif identity != reference[1]:
-            differing = sorted(k for k in identity if identity[k] != reference[1][k])
-            raise ValueError(
-                f"{path}: evaluated on other scenarios than {reference[0]} "
-                f"({', '.join(differing)} differ); re-run `socnav-wm evaluate` for both"
-            )
-        trajectories = eval_dir / f"{method}-trajectories.parquet"
-        found[method] = MethodEvaluation(
-            method=method,
-            episodes=pq.read_table(path),
-            metadata=metadata,
-            trajectories_path=trajectories if trajectories.is_file() else None,
-        )
-    return found, absent
-
-
-def load_training_returns(
-    training_dir: str | Path, variants: Sequence[str] = AGENT_METHODS
-) -> dict[str, dict[int, pa.Table]]:
-    """Training logs ``{variant: {seed: table}}`` from ``{training_dir}/{variant}/seed-*.parquet``.
-
-    Each table has (at least) ``return`` and ``success`` columns, one row per episode, sorted
-    by the ``episode`` column when there is one. Variants without logs are left out.
-    """
-    training_dir = Path(training_dir)
-    logs: dict[str, dict[int, pa.Table]] = {}
-    for variant in variants:
-        folder = training_dir / variant
-        if not folder.is_dir():
-            continue
-        for path in sorted(folder.glob("seed-*.parquet")):
-            try:
-                seed = int(path.stem.removeprefix("seed-"))
-            except ValueError:
-                continue
-            table = pq.read_table(path)
-            if "episode" in table.column_names:
-                table = table.sort_by("episode")
-            logs.setdefault(variant, {})[seed] = table
-    return logs
-
-
-# --------------------------------------------------------------------------------------------
-# Training logs
-# --------------------------------------------------------------------------------------------
-
-
-def training_summary(
-    logs: Mapping[str, Mapping[int, pa.Table]],
-    *,
-    window: int = DEFAULT_SMOOTHING_WINDOW,
-    solved_window: int | None = None,
-    solved_success_rate: float | None = None,
-) -> dict[str, dict[str, Any]]:
-    """Per variant and seed: episodes, final smoothed return, episodes to solve.
-
-    The final smoothed return ("plateau") is the mean return of the last ``window`` episodes
-    (the last point of the Fig. 6 curve). Episodes to solve is the project's definition
-    (``socnav_wm.agents.training.episodes_to_solve``: first episode at which the success rate of the
-    last ``solved_window`` episodes reaches ``solved_success_rate``; defaults from
-    :class:`~socnav_wm.agents.params.AgentParams`), None when never reached.
-
-    Returns:
-        ``{variant: {"seeds": [...], "episodes": {seed: E}, "plateau": {seed: value},
-        "episodes_to_solve": {seed: int | None}}}``.
-    """
-    if not logs:
-        return {}
-    # The project's one definition of "solved" (importing it imports torch: only when needed).
-    from socnav_wm.agents.training import episodes_to_solve
-
-    defaults = AgentParams()
-    solved_window = solved_window or defaults.solved_window
-    solved_success_rate = solved_success_rate or defaults.solved_success_rate
-    summary: dict[str, dict[str, Any]] = {}
-    for variant, seeds in logs.items():
-        entry: dict[str, Any] = {"seeds": sorted(seeds), "episodes": {}, "plateau": {}}
-        entry["episodes_to_solve"] = {}
-        for seed in sorted(seeds):
-            table = seeds[seed]
-            returns = table["return"].to_numpy().astype(np.float64)
-            entry["episodes"][seed] = int(returns.size)
-            entry["plateau"][seed] = float(smooth(returns, window)[-1]) if returns.size else None
-            if "success" in table.column_names:
-                success = table["success"].to_numpy().astype(bool)
-                entry["episodes_to_solve"][seed] = episodes_to_solve(
-                    success, solved_window, solved_success_rate
-                )
-            else:
-                entry["episodes_to_solve"][seed] = None
-        summary[variant] = entry
-    return summary
 
 
 # --------------------------------------------------------------------------------------------
@@ -336,13 +158,10 @@ def build_report(
     *,
     env_params: EnvParams | None = None,
     scenario_seed: int | None = None,
-    reference: str = "dueling-dqn",
-    methods: Sequence[str] = METHODS,
-    gif_scenarios: Sequence[int] = (0, 1, 2),
-    smoothing_window: int = DEFAULT_SMOOTHING_WINDOW,
-    solved_window: int | None = None,
-    solved_success_rate: float | None = None,
-    alpha: float = 0.05,
+    report: ReportParams,
+    methods: Sequence[str] = METHOD_NAMES,
+    solved_window: int,
+    solved_success_rate: float,
     gif_size: int = 200,
     gif_max_frames: int = 60,
     documents: Sequence[str | Path] = (),
@@ -359,13 +178,12 @@ def build_report(
         metrics_path: the machine-readable summary (``metrics/report.json``).
         env_params, scenario_seed: the test scenarios the report expects (checked against the
             files' metadata when given; the files' values are used otherwise).
-        reference: the method every other is compared with.
+        report: the ``report`` section: the reference every other method is compared with,
+            the family-wise error rate of the paired tests, the training curves' rolling-mean
+            window and the test scenarios of ``figures/scenarios.gif`` (empty: no GIF).
         methods: the methods to look for.
-        gif_scenarios: test scenarios shown in ``figures/scenarios.gif`` (empty: no GIF).
-        smoothing_window: rolling-mean window of the training curves, episodes.
         solved_window, solved_success_rate: the "solved" criterion of the training claims
-            (defaults: :class:`~socnav_wm.agents.params.AgentParams`).
-        alpha: family-wise error rate of the paired tests.
+            (``agent.solved_window``, ``agent.solved_success_rate``).
         gif_size: GIF cell side, px.
         gif_max_frames: frames per scenario in the GIF (long episodes are subsampled).
         documents: markdown files (the README) whose ``results`` block
@@ -382,6 +200,8 @@ def build_report(
     Raises:
         ValueError: evaluation files made on different scenarios.
     """
+    reference, alpha, smoothing_window = report.reference, report.alpha, report.smoothing_window
+    gif_scenarios = report.gif_scenarios
     out_dir = Path(out_dir)
     figures_dir = out_dir / "figures"
     evaluations, absent = load_evaluations(

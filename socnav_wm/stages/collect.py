@@ -16,8 +16,8 @@ from socnav_wm.stages.common import open_stage, save_stage_params
 def run(
     params: Params,
     *,
-    out: Path = Path("data/rollouts"),
-    metrics: Path = Path("metrics/collect.json"),
+    out: Path,
+    metrics: Path,
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:

@@ -1,21 +1,24 @@
 """Each stage's source dependencies, computed from its imports.
 
-A stage's command runs its module in :mod:`socnav_wm.stages` (a study's: :mod:`socnav_wm.sweep`);
-the Python files it can execute are that module's import closure within the ``socnav_wm``
-package: every ``import`` statement of every file reached (at the top of a module or inside a
-function alike), and the ``__init__.py`` of every package on the way. ``dvc.yaml`` and
-``studies/dvc.yaml`` list exactly these files as each stage's deps, and
+A stage's command runs its module in :mod:`socnav_wm.stages` (a study's:
+:mod:`socnav_wm.studies.runner`); the Python files it can execute are that module's import
+closure within the ``socnav_wm`` package: every ``import`` statement of every file reached (at
+the top of a module or inside a function alike), and the ``__init__.py`` of every package on the
+way. ``dvc.yaml`` and ``studies/dvc.yaml`` list exactly these files as each stage's deps, and
 ``tests/test_dvc_deps.py`` fails when they disagree; ``socnav-wm deps`` prints the lists.
 
-Two modules are deliberately not dependencies, nor followed: ``socnav_wm/cli.py`` (it parses
-options and calls a stage function, and listing it would rerun every stage on an edit of any
-command) and ``socnav_wm/tracking.py`` (it writes to MLflow, never to a stage's outputs).
+Two modules are deliberately not dependencies, nor followed: the ``socnav_wm/cli/`` package (it
+parses options and calls a stage function, and listing it would rerun every stage on an edit of
+any command) and ``socnav_wm/tracking.py`` (it writes to MLflow, never to a stage's outputs).
 """
 
 from __future__ import annotations
 
 import ast
 from pathlib import Path
+
+from socnav_wm.method_names import BASELINE_NAMES, VARIANT_NAMES
+from socnav_wm.methods import METHODS
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 """The ``socnav_wm`` package directory."""
@@ -34,13 +37,28 @@ STAGE_MODULES: dict[str, str] = {
     "predict": "socnav_wm.stages.predict",
     "report": "socnav_wm.stages.report",
     # studies/dvc.yaml: `socnav-wm sweep --study NAME` (train-agent and evaluate per run).
-    "study_horizon": "socnav_wm.sweep",
-    "study_seeds": "socnav_wm.sweep",
-    "study_sort_humans": "socnav_wm.sweep",
+    "study_horizon": "socnav_wm.studies.runner",
+    "study_seeds": "socnav_wm.studies.runner",
+    "study_sort_humans": "socnav_wm.studies.runner",
     # studies/dvc.yaml: the claims with the studies' evidence, after them and the report.
     "study_claims": "socnav_wm.stages.study_claims",
 }
 """Stage name → the module its command runs."""
+
+STAGE_METHODS: dict[str, tuple[str, ...]] = {
+    "evaluate": VARIANT_NAMES,
+    "evaluate_baseline": BASELINE_NAMES,
+    "evaluate_planner": ("cv-mpc", "oracle-mpc"),
+    "evaluate_wm_mpc": ("wm-mpc",),
+    "evaluate_vae_lstm_mpc": ("vae-lstm-mpc",),
+    "study_horizon": VARIANT_NAMES,
+    "study_seeds": VARIANT_NAMES,
+    "study_sort_humans": VARIANT_NAMES,
+}
+"""Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).
+The registry imports a method's builder only when it builds a policy, out of the imports'
+sight: the stage's modules are its command's module and these methods' builders
+(:attr:`socnav_wm.methods.Method.builder`)."""
 
 PIPELINE_FILES: dict[str, tuple[str, ...]] = {
     "dvc.yaml": tuple(stage for stage in STAGE_MODULES if not stage.startswith("study_")),
@@ -93,11 +111,17 @@ def _with_parents(module: str) -> list[str]:
     return [".".join(parts[: i + 1]) for i in range(len(parts))]
 
 
-def import_closure(module: str) -> list[str]:
-    """The repository-relative paths of the ``socnav_wm`` files that ``module`` can execute."""
+def stage_modules(stage: str) -> list[str]:
+    """The modules stage ``stage`` runs: its command's, then its methods' builders."""
+    builders = {METHODS[name].builder_module for name in STAGE_METHODS.get(stage, ())}
+    return [STAGE_MODULES[stage], *sorted(builders)]
+
+
+def import_closure(*modules: str) -> list[str]:
+    """The repository-relative paths of the ``socnav_wm`` files that ``modules`` can execute."""
     seen: set[str] = set()
     files: set[Path] = set()
-    todo = [module]
+    todo = list(modules)
     while todo:
         name = todo.pop()
         for current in _with_parents(name):
@@ -114,11 +138,11 @@ def import_closure(module: str) -> list[str]:
 
 
 def stage_dependencies(path: str | Path | None = None) -> dict[str, list[str]]:
-    """Stage name → the source files it depends on (:func:`import_closure` of its module): of
+    """Stage name → the source files it depends on (:func:`import_closure` of its modules): of
     every stage, or of those of pipeline file ``path`` (``…/studies/dvc.yaml``: the studies',
     any other ``dvc.yaml``: the root pipeline's)."""
     stages = STAGE_MODULES if path is None else PIPELINE_FILES[_pipeline_file(path)]
-    return {stage: import_closure(STAGE_MODULES[stage]) for stage in stages}
+    return {stage: import_closure(*stage_modules(stage)) for stage in stages}
 
 
 def _pipeline_file(path: str | Path) -> str:

@@ -7,16 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from socnav_wm.config import Params
-from socnav_wm.evaluation.evaluate import (
-    AGENT_METHODS,
-    BASELINE_METHODS,
-    METHODS,
-    PLANNER_METHODS,
-    evaluate_method,
-    evaluation_metrics,
-    write_evaluation,
-)
+from socnav_wm.evaluation.evaluate import evaluate_method, evaluation_metrics, write_evaluation
 from socnav_wm.io import check_writable, outputs_together
+from socnav_wm.layout import agent_file
+from socnav_wm.methods import method as lookup
 from socnav_wm.stages.common import open_stage
 
 
@@ -24,33 +18,26 @@ def run(
     params: Params,
     *,
     method: str,
-    agents_dir: Path = Path("models/agents"),
-    out_dir: Path = Path("data/eval"),
-    metrics_dir: Path = Path("metrics/eval"),
+    agents_dir: Path,
+    out_dir: Path,
+    metrics_dir: Path,
     planner_files: dict[str, Path] | None = None,
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
-    if method not in METHODS:
-        raise ValueError(f"--method: unknown {method!r}; expected one of {', '.join(METHODS)}")
-    stage = (
-        "evaluate_baseline"
-        if method in BASELINE_METHODS
-        else "evaluate_planner"
-        if method in PLANNER_METHODS
-        else "evaluate"
-    )
+    kind = lookup(method, "--method").kind
+    stage = {"agent": "evaluate", "robot": "evaluate_baseline", "planner": "evaluate_planner"}[kind]
     episodes_path = out_dir / f"{method}.parquet"
     trajectories_path = out_dir / f"{method}-trajectories.parquet"
     metrics_path = metrics_dir / f"{method}.json"
-    if planner_files and method not in PLANNER_METHODS:
+    if planner_files and kind != "planner":
         roles = ", ".join(f"--{role.replace('_', '-')}" for role in planner_files)
         raise ValueError(f"{roles}: only for a planner, not {method!r}")
     check_writable(episodes_path, trajectories_path, metrics_path)
     with open_stage(stage, f"evaluate/{method}", params, tracking=tracking) as run:
         agent_paths = None
-        if method in AGENT_METHODS:
-            agent_paths = {s: agents_dir / method / f"seed-{s}.pt" for s in params.experiment.seeds}
+        if kind == "agent":
+            agent_paths = {s: agent_file(agents_dir, method, s) for s in params.experiment.seeds}
             for s, path in agent_paths.items():
                 if not path.is_file():
                     raise FileNotFoundError(
@@ -58,7 +45,7 @@ def run(
                         f"--variant {method} --seed {s})"
                     )
         overrides_of = None
-        if method in BASELINE_METHODS:
+        if kind == "robot":
             overrides_of = getattr(params.baselines, method).model_dump()
         result = evaluate_method(
             method,
@@ -67,7 +54,7 @@ def run(
             episodes=params.eval.episodes,
             agent_paths=agent_paths,
             baseline_overrides=overrides_of,
-            planning=params.planning if method in PLANNER_METHODS else None,
+            planning=params.planning if kind == "planner" else None,
             planner_files=planner_files,
             device=params.eval.device,
             batch_size=params.eval.batch_size,

@@ -5,6 +5,7 @@ one, for the paper's VAE + LSTM and the planning world model's seeds, to
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -12,11 +13,10 @@ from socnav_wm.agents.agent_file import load_agent
 from socnav_wm.config import STAGE_SECTIONS, Params, params_dict, select_sections
 from socnav_wm.evaluation.figures import prediction_figure
 from socnav_wm.io import check_writable, outputs_together, write_json_atomic
-from socnav_wm.stages.train_planning_model import model_path
 from socnav_wm.tracking import stage_run
-from socnav_wm.worldmodel.prediction import evaluate_prediction
+from socnav_wm.worldmodel.files import load_lstm, load_vae
+from socnav_wm.worldmodel.prediction import error_table, evaluate_prediction
 from socnav_wm.worldmodel.residual import load_residual
-from socnav_wm.worldmodel.training import load_lstm, load_vae
 
 
 def run(
@@ -25,17 +25,15 @@ def run(
     vae: Path,
     lstm: Path,
     agent: Path | None,
-    planning_models: list[Path] | None = None,
+    planning_models: list[Path],
     out: Path,
     figure: Path,
     tracking: bool = True,
 ) -> dict[str, Any]:
     """Measure with the ``prediction`` section's settings, write ``out`` and ``figure``
-    together, log to MLflow; returns the errors. ``planning_models`` defaults to every seed of
-    ``planning_model.seeds`` at its pipeline path."""
+    together, log to MLflow; returns the errors. ``planning_models``: one file per training seed
+    of the planning world model."""
     check_writable(out, figure)
-    if planning_models is None:
-        planning_models = [model_path(seed) for seed in params.planning_model.seeds]
     settings = {
         **select_sections(params_dict(params), STAGE_SECTIONS["predict"]),
         "files": {
@@ -43,17 +41,12 @@ def run(
             "planning_models": [str(path) for path in planning_models],
         },
     }
-    p = params.prediction
     with stage_run("predict", settings, enabled=tracking) as mlflow_run:
         result = evaluate_prediction(
             params.env,
+            params.prediction,
             world_model=(load_vae(vae), load_lstm(lstm)),
             agent=load_agent(agent) if agent is not None else None,
-            episodes=p.episodes,
-            scenario_seed=p.scenario_seed,
-            warmup=p.warmup,
-            horizon=p.horizon,
-            epsilon=p.epsilon,
             planning_models=[load_residual(path) for path in planning_models],
         )
         with outputs_together(out, figure) as (out_tmp, figure_tmp):
@@ -71,3 +64,61 @@ def run(
         mlflow_run.log_artifact(out)
         mlflow_run.log_artifact(figure)
     return result
+
+
+Table = tuple[str, list[dict[str, Any]], dict[str, str]]
+"""A table to print: its title, its rows, and the format of each numeric column."""
+
+
+def tables(result: Mapping[str, Any], ks: Sequence[int]) -> list[Table]:
+    """The errors of :func:`run`'s ``result`` at ``ks`` steps ahead as tables, per policy: every
+    predictor's mean error, the humans' error by whether they drew a new goal, and the planning
+    model against constant velocity (the last two where the result has them)."""
+    found: list[Table] = []
+    for policy, errors in result["policies"].items():
+        table = error_table(errors, ks)
+        formats = {c: ".3f" for c in table[0] if c not in ("k", "n")} if table else {}
+        found.append(
+            (f"{policy} policy: mean error (m) k steps ahead", table, {"n": "d", **formats})
+        )
+        change = errors.get("goal_change")
+        if change:
+            rows = []
+            for i, k in enumerate(errors["k"]):
+                if k not in ks:
+                    continue
+                row: dict[str, Any] = {"k": k, "new goal": change["changed_share"][i]}
+                for name, values in change["predictors"].items():
+                    if name in ("constant-velocity", "planning-model"):
+                        row[f"{name}: kept"] = values["kept"][i]
+                        row[f"{name}: new"] = values["changed"][i]
+                rows.append(row)
+            found.append(
+                (
+                    f"{policy} policy: humans' error (m) by whether they drew a new goal",
+                    rows,
+                    {c: ".3f" for c in rows[0] if c != "k"} if rows else {},
+                )
+            )
+        versus = errors.get("planning_model")
+        if versus:
+            rows = [
+                {"k": k, "difference": d, "low": ci[0], "high": ci[1], "verdict": v}
+                for k, d, ci, v in zip(
+                    errors["k"],
+                    versus["difference"],
+                    versus["difference_ci"],
+                    versus["verdict"],
+                    strict=True,
+                )  # fmt: skip
+                if k in ks
+            ]
+            found.append(
+                (
+                    f"{policy} policy: planning model − constant velocity, humans (m), "
+                    f"{versus['seeds']} seeds",
+                    rows,
+                    {"difference": "+.4f", "low": "+.4f", "high": "+.4f"},
+                )
+            )
+    return found

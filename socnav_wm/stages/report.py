@@ -6,25 +6,25 @@ from pathlib import Path
 
 from socnav_wm.config import Params
 from socnav_wm.evaluation.report import build_report
+from socnav_wm.layout import LAYOUT
 from socnav_wm.planning.params import PLANNER_NAMES
 from socnav_wm.stages.common import open_stage
 
-RESULTS_DOCUMENTS = (Path("README.md"), Path("docs/evaluation.md"))
+RESULTS_DOCUMENTS = LAYOUT.results_documents
 """The markdown files whose ``results`` block the stage fills (outputs of the DVC stage)."""
 
 
 def run(
     params: Params,
     *,
-    eval_dir: Path = Path("data/eval"),
-    training_dir: Path = Path("data/training"),
-    out_dir: Path = Path("reports"),
-    metrics: Path = Path("metrics/report.json"),
+    eval_dir: Path,
+    training_dir: Path,
+    out_dir: Path,
+    metrics: Path,
     documents: tuple[Path, ...] | None = None,
-    prediction: Path | None = Path("metrics/prediction.json"),
+    prediction: Path | None,
     tracking: bool = True,
 ) -> str:
-    r = params.report
     if documents is None:  # the results blocks of the README and the docs, where they exist
         documents = tuple(p for p in RESULTS_DOCUMENTS if p.is_file())
     with open_stage("report", "report", params, tracking=tracking) as run:
@@ -35,12 +35,9 @@ def run(
             metrics,
             env_params=params.env,
             scenario_seed=params.eval.scenario_seed,
-            reference=r.reference,
-            gif_scenarios=tuple(r.gif_scenarios),
-            smoothing_window=r.smoothing_window,
+            report=params.report,
             solved_window=params.agent.solved_window,
             solved_success_rate=params.agent.solved_success_rate,
-            alpha=r.alpha,
             documents=documents,
             prediction_path=prediction if prediction is not None and prediction.is_file() else None,
             planning_horizons={

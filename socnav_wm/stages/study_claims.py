@@ -154,9 +154,9 @@ def _study(studies_dir: Path, name: str) -> tuple[Any, str] | None:
 
 def run(
     *,
-    report_claims: Path = Path("reports/claims.json"),
-    studies_dir: Path = Path("reports/studies"),
-    documents: Sequence[Path] = (Path("docs/studies.md"),),
+    report_claims: Path,
+    studies_dir: Path,
+    documents: Sequence[Path],
     tracking: bool = True,
 ) -> str:
     """Merge ``report_claims`` with the studies' claims under ``studies_dir``, write

@@ -18,6 +18,7 @@ from socnav_wm.agents.training import (
 )
 from socnav_wm.config import Params
 from socnav_wm.io import check_writable, outputs_together, write_json_atomic
+from socnav_wm.layout import agent_file
 from socnav_wm.stages.common import (
     config_path,
     log_torch_model,
@@ -32,12 +33,12 @@ def run(
     *,
     variant: str,
     seed: int,
-    vae: Path = Path("models/vae.pt"),
-    lstm: Path = Path("models/lstm.pt"),
-    out_dir: Path = Path("models/agents"),
-    log_dir: Path = Path("data/training"),
-    metrics_dir: Path = Path("metrics/agents"),
-    checkpoint_dir: Path = Path("checkpoints"),
+    vae: Path,
+    lstm: Path,
+    out_dir: Path,
+    log_dir: Path,
+    metrics_dir: Path,
+    checkpoint_dir: Path,
     resume: bool = False,
     keep_checkpoint: bool = False,
     tracking: bool = True,
@@ -46,7 +47,7 @@ def run(
     check_variant(variant)
     name = f"{variant}/seed-{seed}"
     p = params.agent
-    out = out_dir / variant / f"seed-{seed}.pt"
+    out = agent_file(out_dir, variant, seed)
     log = log_dir / variant / f"seed-{seed}.parquet"
     metrics = metrics_dir / variant / f"seed-{seed}.json"
     check_writable(out, config_path(out), log, metrics)

@@ -17,18 +17,18 @@ from socnav_wm.stages.common import (
     open_stage,
     world_model_outputs,
 )
+from socnav_wm.worldmodel.files import save_lstm
 from socnav_wm.worldmodel.fit import fit_lstm
-from socnav_wm.worldmodel.training import save_lstm
 
 
 def run(
     params: Params,
     *,
-    rollouts: Path = Path("data/rollouts"),
-    vae: Path = Path("models/vae.pt"),
-    out: Path = Path("models/lstm.pt"),
-    metrics: Path = Path("metrics/lstm.json"),
-    history: Path = Path("metrics/lstm_history.json"),
+    rollouts: Path,
+    vae: Path,
+    out: Path,
+    metrics: Path,
+    history: Path,
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
@@ -40,7 +40,6 @@ def run(
                 vae,
                 params.lstm,
                 seed=params.seed,
-                device=params.lstm.device,
                 on_epoch=epoch_logger(run, bar),
             )
         result = fitted.result

@@ -10,6 +10,7 @@ import torch
 
 from socnav_wm.config import Params
 from socnav_wm.io import check_writable
+from socnav_wm.layout import planning_model_file
 from socnav_wm.progress import progress
 from socnav_wm.stages.common import (
     config_path,
@@ -21,25 +22,20 @@ from socnav_wm.stages.common import (
 from socnav_wm.worldmodel.residual import fit_residual, save_residual
 
 
-def model_path(seed: int, out_dir: Path = Path("models/planning")) -> Path:
-    """Where seed ``seed``'s model lives (``wm-mpc`` plans with seed 0's)."""
-    return out_dir / f"seed-{seed}.pt"
-
-
 def run(
     params: Params,
     *,
     seed: int,
-    rollouts: Path = Path("data/rollouts"),
-    out_dir: Path = Path("models/planning"),
-    metrics_dir: Path = Path("metrics/planning"),
+    rollouts: Path,
+    out_dir: Path,
+    metrics_dir: Path,
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
     p = params.planning_model
     if seed not in p.seeds:
         raise ValueError(f"seed {seed} is not in planning_model.seeds {p.seeds}")
-    out = model_path(seed, out_dir)
+    out = planning_model_file(out_dir, seed)
     metrics = metrics_dir / f"seed-{seed}.json"
     history = metrics_dir / f"seed-{seed}_history.json"
     check_writable(out, config_path(out), metrics, history)
@@ -49,17 +45,8 @@ def run(
             result = fit_residual(
                 rollouts,
                 params.env,
+                p,
                 seed=seed,
-                horizon=p.horizon,
-                stride=p.stride,
-                val_fraction=p.val_fraction,
-                hidden_dim=p.hidden_dim,
-                learning_rate=p.learning_rate,
-                batch_size=p.batch_size,
-                max_epochs=p.max_epochs,
-                patience=p.patience,
-                room=p.room,
-                relative_weight=p.relative_weight,
                 on_epoch=epoch_logger(run, bar),
             )
         summary: dict[str, Any] = {"seed": seed, **result.metrics}

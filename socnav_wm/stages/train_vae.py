@@ -17,17 +17,17 @@ from socnav_wm.stages.common import (
     open_stage,
     world_model_outputs,
 )
+from socnav_wm.worldmodel.files import save_vae
 from socnav_wm.worldmodel.fit import fit_vae
-from socnav_wm.worldmodel.training import save_vae
 
 
 def run(
     params: Params,
     *,
-    rollouts: Path = Path("data/rollouts"),
-    out: Path = Path("models/vae.pt"),
-    metrics: Path = Path("metrics/vae.json"),
-    history: Path = Path("metrics/vae_history.json"),
+    rollouts: Path,
+    out: Path,
+    metrics: Path,
+    history: Path,
     tracking: bool = True,
     quiet: bool = True,
 ) -> str:
@@ -38,7 +38,6 @@ def run(
                 rollouts,
                 params.vae,
                 seed=params.seed,
-                device=params.vae.device,
                 on_epoch=epoch_logger(run, bar),
             )
         result = fitted.result

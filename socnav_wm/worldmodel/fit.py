@@ -6,30 +6,21 @@ episodes the VAE never saw either (when the two fractions are equal).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from socnav_wm.config import LstmParams, VaeParams
 from socnav_wm.data.shards import column_to_numpy, read_rollouts
 from socnav_wm.data.windows import Windows, make_windows, split_episodes
-from socnav_wm.worldmodel.training import (
-    LSTMTrainResult,
-    VAETrainResult,
-    encode_observations,
-    evaluate_lstm,
-    load_vae,
-    plot_latent_predictions,
-    plot_reconstruction,
-    resolve_device,
-    train_lstm,
-    train_vae,
-)
-
-EpochCallback = Callable[[int, dict[str, float]], None]
+from socnav_wm.devices import resolve_device
+from socnav_wm.worldmodel.evaluation import encode_observations, evaluate_lstm
+from socnav_wm.worldmodel.figures import plot_latent_predictions, plot_reconstruction
+from socnav_wm.worldmodel.files import load_vae
+from socnav_wm.worldmodel.fitting import EpochCallback
+from socnav_wm.worldmodel.params import LstmParams, VaeParams
+from socnav_wm.worldmodel.training import LSTMTrainResult, VAETrainResult, train_lstm, train_vae
 
 
 @dataclass
@@ -61,7 +52,6 @@ def fit_vae(
     params: VaeParams,
     *,
     seed: int,
-    device: str = "auto",
     on_epoch: EpochCallback | None = None,
 ) -> FittedVAE:
     """Train the VAE on every observation of the training episodes of ``rollouts``."""
@@ -69,20 +59,7 @@ def fit_vae(
     ids = column_to_numpy(table, "episode_id")
     obs = column_to_numpy(table, "obs")
     train, val = split_episodes(ids, params.val_fraction, seed)
-    result = train_vae(
-        obs[train],
-        obs[val],
-        latent_dim=params.latent_dim,
-        hidden_dim=params.hidden_dim,
-        kl_weight=params.kl_weight,
-        learning_rate=params.learning_rate,
-        batch_size=params.batch_size,
-        max_epochs=params.max_epochs,
-        patience=params.patience,
-        seed=seed,
-        device=resolve_device(device),
-        on_epoch=on_epoch,
-    )
+    result = train_vae(obs[train], obs[val], params, seed=seed, on_epoch=on_epoch)
     data = {
         "train_rows": int(train.sum()),
         "val_rows": int(val.sum()),
@@ -97,11 +74,10 @@ def fit_lstm(
     params: LstmParams,
     *,
     seed: int,
-    device: str = "auto",
     on_epoch: EpochCallback | None = None,
 ) -> FittedLSTM:
     """Encode the rollouts with the frozen VAE (its mean), then train the latent LSTM."""
-    torch_device = resolve_device(device)
+    torch_device = resolve_device(params.device)
     table = read_rollouts(rollouts, columns=["episode_id", "obs", "action", "next_obs"])
     ids = column_to_numpy(table, "episode_id")
     actions = column_to_numpy(table, "action").astype(np.int64)
@@ -116,18 +92,7 @@ def fit_lstm(
         )
 
     train_windows, val_windows = windows(train), windows(val)
-    result = train_lstm(
-        train_windows,
-        val_windows,
-        hidden_dim=params.hidden_dim,
-        learning_rate=params.learning_rate,
-        batch_size=params.batch_size,
-        max_epochs=params.max_epochs,
-        patience=params.patience,
-        seed=seed,
-        device=torch_device,
-        on_epoch=on_epoch,
-    )
+    result = train_lstm(train_windows, val_windows, params, seed=seed, on_epoch=on_epoch)
     metrics = evaluate_lstm(result.model, val_windows)
     # The longest validation episode, for the predicted-vs-true figure.
     val_ids = ids[val]

@@ -131,3 +131,15 @@ class LatentLSTM(nn.Module):
         all_gates = gates.unsqueeze(1) + action_part.unsqueeze(0)  # (batch, actions, 4H)
         h_next, c_next = self._cell(all_gates, c.unsqueeze(1))
         return self.head(h_next), (h_next, c_next)
+
+
+def masked_mse(prediction: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean squared error per latent dim over the unmasked steps (the LSTM's training loss).
+
+    Args:
+        prediction, target: (batch, seq, latent).
+        mask: (batch, seq) bool; padding (False) contributes nothing.
+    """
+    per_step = (prediction - target).pow(2).mean(dim=-1)
+    weights = mask.to(per_step.dtype)
+    return (per_step * weights).sum() / weights.sum().clamp_min(1.0)

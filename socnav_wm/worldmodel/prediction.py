@@ -33,6 +33,7 @@ import numpy as np
 from socnav_wm.env.core import NUM_ACTIONS, Simulator
 from socnav_wm.env.params import EnvParams
 from socnav_wm.worldmodel.ego import PREDICTORS, positions, predict_positions
+from socnav_wm.worldmodel.params import PredictionParams
 
 MODEL_PREDICTOR = "vae-lstm"
 """The name of the paper's world model among the predictors."""
@@ -354,14 +355,10 @@ def error_table(errors: Mapping[str, Any], ks: Sequence[int] = (1, 4, 8, 12, 16)
 
 def evaluate_prediction(
     env_params: EnvParams,
+    params: PredictionParams,
     *,
     world_model: tuple[Any, Any],
     agent: Any | None,
-    episodes: int,
-    scenario_seed: int,
-    warmup: int,
-    horizon: int,
-    epsilon: float,
     planning_models: Sequence[Any] = (),
     batch_size: int = 512,
 ) -> dict[str, Any]:
@@ -369,12 +366,9 @@ def evaluate_prediction(
     under the random policy and, with ``agent``, under its ε-greedy policy:
     ``{"settings": {…}, "policies": {"random": …, "agent": …}}``, each policy's entry as
     :func:`prediction_errors` returns it. Both policies run scenarios ``0..episodes−1`` of
-    ``scenario_seed``."""
-    for name, value, low in (("episodes", episodes, 1), ("horizon", horizon, 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
-    if not 0.0 <= epsilon <= 1.0:
-        raise ValueError(f"epsilon: must be in [0, 1], got {epsilon!r}")
+    ``scenario_seed`` (``params``: the ``prediction`` section)."""
+    episodes, scenario_seed, epsilon = params.episodes, params.scenario_seed, params.epsilon
+    warmup, horizon = params.warmup, params.horizon
     ids = np.arange(episodes)
     policies: dict[str, Policy] = {"random": random_policy(scenario_seed)}
     if agent is not None:

@@ -25,9 +25,7 @@ of ``collect``. There is no lossy bottleneck: positions in, positions out.
 from __future__ import annotations
 
 import copy
-import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,8 +35,9 @@ from torch import nn
 
 from socnav_wm.env.core import discrete_commands
 from socnav_wm.env.params import EnvParams
-from socnav_wm.planning.models import ConstantVelocityModel, Rollout
 from socnav_wm.worldmodel.ego import human_velocities, positions
+from socnav_wm.worldmodel.fitting import EpochCallback, Fit, fit
+from socnav_wm.worldmodel.params import PlanningModelParams
 
 
 def _rotate(x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
@@ -367,29 +366,25 @@ def train_residual(
     train: Sequences,
     val: Sequences,
     env_params: EnvParams,
+    params: PlanningModelParams,
     *,
-    hidden_dim: int,
-    learning_rate: float,
-    batch_size: int,
-    max_epochs: int,
-    patience: int,
     seed: int,
-    room: bool = False,
-    relative_weight: float = 0.0,
-    on_epoch: Callable[[int, dict[str, float]], None] | None = None,
+    on_epoch: EpochCallback | None = None,
 ) -> ResidualTrainResult:
     """Adam on the open-loop rollout loss, its learning rate decayed to zero over
     ``max_epochs`` (cosine); the weights of the best validation epoch are kept (the untrained
-    model, constant velocity, is epoch 0). ``room``: the model knows the room (the samples
-    must carry the robot's poses). ``relative_weight`` ``p``: step ``k``'s error is weighted
-    by ``1 / e_k^p`` (normalised to a mean of 1), where ``e_k`` is constant velocity's mean
-    error at ``k`` on the training samples: with 0 the long steps' errors, 100× the first
-    ones', decide alone; with 1 every step counts relative to constant velocity. Validation
-    uses the plain mean (the metric)."""
+    model, constant velocity, is epoch 0). ``params.room``: the model knows the room (the
+    samples must carry the robot's poses). ``params.relative_weight`` ``p``: step ``k``'s error
+    is weighted by ``1 / e_k^p`` (normalised to a mean of 1), where ``e_k`` is constant
+    velocity's mean error at ``k`` on the training samples: with 0 the long steps' errors, 100×
+    the first ones', decide alone; with 1 every step counts relative to constant velocity.
+    Validation uses the plain mean (the metric). ``horizon``, ``stride`` and ``val_fraction``
+    are the caller's (the samples are already made)."""
+    room, relative_weight = params.room, params.relative_weight
     torch.manual_seed(seed)
     model = ResidualDynamics(
         env_params.num_humans,
-        hidden_dim,
+        params.hidden_dim,
         env_params.dt,
         env_params.human_max_speed,
         env_params.spawn_half_size if room else None,
@@ -435,46 +430,42 @@ def train_residual(
             per_step = (error * m).sum(0) / m.sum(0).clamp(min=1)
         weights = per_step.clamp(min=1e-6) ** -relative_weight
         weights = weights / weights.mean()
-    optimizer = torch.optim.Adam(model.parameters(), lr=learning_rate)
-    updates = max_epochs * -(-len(train) // batch_size)
-    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=updates)
-    generator = torch.Generator().manual_seed(seed)
-    best = validation_loss()
-    history = [{"epoch": 0, "train_loss": math.nan, "val_loss": best}]
-    best_state, best_epoch, waited = copy.deepcopy(model.state_dict()), 0, 0
-    start = time.process_time()
-    for epoch in range(1, max_epochs + 1):
-        model.train()
-        order = torch.randperm(len(train), generator=generator)
-        losses = []
-        for i in range(0, len(train), batch_size):
-            rows = order[i : i + batch_size]
-            p, u, v, w, y, m, pose = (x[rows] for x in train_t)
-            predicted = model.rollout(p, u, v, w, pose)
-            loss = _masked_loss(predicted, y, m, weights)
-            optimizer.zero_grad()
-            loss.backward()
-            nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-            optimizer.step()
-            schedule.step()
-            losses.append(float(loss.detach()))
-        val_loss = validation_loss()
-        row = {"epoch": epoch, "train_loss": float(np.mean(losses)), "val_loss": val_loss}
-        history.append(row)
+
+    def batch_loss(rows: torch.Tensor) -> tuple[torch.Tensor, float]:
+        p, u, v, w, y, m, pose = (x[rows] for x in train_t)
+        return _masked_loss(model.rollout(p, u, v, w, pose), y, m, weights), 1.0
+
+    optimizer = torch.optim.Adam(model.parameters(), lr=params.learning_rate)
+    updates = params.max_epochs * -(-len(train) // params.batch_size)
+    task = Fit(
+        name="planning model",
+        model=model,
+        optimizer=optimizer,
+        rows=len(train),
+        batch_size=params.batch_size,
+        generator=torch.Generator().manual_seed(seed),
+        device=torch.device("cpu"),
+        batch_loss=batch_loss,
+        validate=lambda: {"val_loss": validation_loss()},
+        max_grad_norm=1.0,
+        scheduler=torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=updates),
+        train_loss=lambda losses, _: float(np.mean(losses)),
+        validate_untrained=True,
+    )
+
+    def report(epoch: int, row: dict[str, float]) -> None:
         if on_epoch is not None:
-            on_epoch(epoch, {"train_loss": row["train_loss"], "val_loss": val_loss})
-        if val_loss < best:
-            best, best_epoch, waited = val_loss, epoch, 0
-            best_state = copy.deepcopy(model.state_dict())
-        else:
-            waited += 1
-            if waited >= patience:
-                break
-    model.load_state_dict(best_state)
-    model.eval()
+            on_epoch(epoch, {"train_loss": row["train_loss"], "val_loss": row["val_loss"]})
+
+    start = time.process_time()
+    fitted = fit(task, max_epochs=params.max_epochs, patience=params.patience, on_epoch=report)
+    history = [
+        {"epoch": int(row["epoch"]), "train_loss": row["train_loss"], "val_loss": row["val_loss"]}
+        for row in fitted.history
+    ]
     metrics = {
-        "best_epoch": best_epoch,
-        "val_loss": best,
+        "best_epoch": fitted.best_epoch,
+        "val_loss": fitted.best_loss,
         "val_loss_constant_velocity": history[0]["val_loss"],
         "epochs": len(history) - 1,
         "train_samples": len(train),
@@ -516,62 +507,6 @@ def residual_positions(
     return out
 
 
-class _ResidualRollout:
-    def __init__(
-        self,
-        model: ResidualDynamics,
-        points: np.ndarray,
-        velocity: np.ndarray,
-        pose: np.ndarray | None,
-        table: torch.Tensor,
-    ) -> None:
-        self.model, self.table = model, table
-        self.points = torch.as_tensor(points, dtype=torch.float32)
-        self.velocity = torch.as_tensor(velocity, dtype=torch.float32)
-        self.pose = None if pose is None else torch.as_tensor(pose, dtype=torch.float32)
-        self.imagined = 0
-
-    def step(self, actions: np.ndarray) -> np.ndarray:
-        a = torch.as_tensor(np.asarray(actions, dtype=np.int64))
-        with torch.no_grad():
-            self.points, self.velocity, self.pose = self.model.step(
-                self.points,
-                self.velocity,
-                self.table[a, 0],
-                self.table[a, 1],
-                self.pose,
-                self.imagined,
-            )
-        self.imagined += 1
-        return self.points.numpy().astype(np.float64)
-
-
-class ResidualPlanningModel(ConstantVelocityModel):
-    """A :class:`~socnav_wm.planning.models.PlanningModel` that follows the episodes as the
-    constant-velocity one does and imagines with the learned correction (float32). A model
-    that knows the room imagines from the robot's room pose, which the planner passes
-    (``planning.walls``)."""
-
-    def __init__(self, model: ResidualDynamics, params: EnvParams) -> None:
-        super().__init__(params)
-        self.net = copy.deepcopy(model).float().eval()
-        self.table = torch.as_tensor(discrete_commands(params), dtype=torch.float32)
-
-    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
-        if self.net.room_half is not None and pose is None:
-            raise ValueError(
-                "wm-mpc: its planning model knows the room and needs the robot's pose "
-                "(set planning.walls: true)"
-            )
-        return _ResidualRollout(
-            self.net,
-            np.repeat(self._points, repeats, axis=0),
-            np.repeat(self._velocity, repeats, axis=0),
-            None if pose is None else np.repeat(np.asarray(pose), repeats, axis=0),
-            self.table,
-        )
-
-
 def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, Any]) -> None:
     """The model's weights and what rebuilds it (torch.save)."""
     torch.save(
@@ -609,18 +544,17 @@ def load_residual(path: Any) -> ResidualDynamics:
 def fit_residual(
     rollouts: Any,
     env_params: EnvParams,
+    params: PlanningModelParams,
     *,
     seed: int,
-    horizon: int,
-    stride: int,
-    val_fraction: float,
-    **training: Any,
+    on_epoch: EpochCallback | None = None,
 ) -> ResidualTrainResult:
     """Train on the rollouts' training episodes, validate on the held-out ones (split as the
-    VAE's and the LSTM's, by episode with ``seed``)."""
+    VAE's and the LSTM's, by episode with ``seed`` and ``params.val_fraction``)."""
     from socnav_wm.data.shards import column_to_numpy, read_rollouts
     from socnav_wm.data.windows import split_episodes
 
+    horizon, stride = params.horizon, params.stride
     for name, value in (("horizon", horizon), ("stride", stride)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
@@ -631,11 +565,13 @@ def fit_residual(
     actions = column_to_numpy(table, "action").astype(np.int64)
     next_obs = column_to_numpy(table, "next_obs")
     pose_after = np.stack([column_to_numpy(table, name) for name in poses], axis=-1)
-    train, val = split_episodes(ids, val_fraction, seed)
+    train, val = split_episodes(ids, params.val_fraction, seed)
 
     def sequences(rows: np.ndarray) -> Sequences:
         return make_sequences(
             obs[rows], actions[rows], ids[rows], next_obs[rows], horizon, stride, pose_after[rows]
         )
 
-    return train_residual(sequences(train), sequences(val), env_params, seed=seed, **training)
+    return train_residual(
+        sequences(train), sequences(val), env_params, params, seed=seed, on_epoch=on_epoch
+    )

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from socnav_wm.worldmodel.files import save_lstm, save_vae
 from socnav_wm.worldmodel.lstm import LatentLSTM
-from socnav_wm.worldmodel.training import save_lstm, save_vae
 from socnav_wm.worldmodel.vae import VAE
 
 # The native update (test_native.py) compiles into a cache folder: the tests' own, not the user's.

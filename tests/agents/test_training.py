@@ -19,15 +19,11 @@ from socnav_wm.agents.agent_file import (
 from socnav_wm.agents.learner import DQNLearner, double_dqn_targets
 from socnav_wm.agents.params import AgentParams
 from socnav_wm.agents.replay import Batch
-from socnav_wm.agents.training import (
-    EPISODE_COLUMNS,
-    episodes_to_solve,
-    selection_seed,
-    train_agent,
-)
+from socnav_wm.agents.training import EPISODE_COLUMNS, selection_seed, train_agent
 from socnav_wm.config import load_params
 from socnav_wm.env import EnvParams
-from socnav_wm.worldmodel.training import save_vae
+from socnav_wm.metrics import episodes_to_solve
+from socnav_wm.worldmodel.files import save_vae
 from tests.agents.conftest import tiny_world_model
 
 # A small empty room: the robot only has to turn towards the goal and drive there.

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import socnav_wm.env  # noqa: F401  (registers SocNav-v0)
+import socnav_wm  # noqa: F401  (registers SocNav-v0)
 from socnav_wm.env.gym import SocNavEnv, SocNavVectorEnv
 
 
@@ -182,16 +182,19 @@ def test_vector_env_refuses_huge_scenario_ids() -> None:
         envs.reset(seed=-3)
 
 
-def test_spec_shows_the_step_limit_and_the_episode_truncates_once_at_201() -> None:
-    env = gym.make("SocNav-v0", num_humans=0)
-    assert env.spec.max_episode_steps == 201
+@pytest.mark.parametrize("max_steps", [201, 230])
+def test_the_episode_truncates_once_at_its_own_max_steps(max_steps: int) -> None:
+    """No TimeLimit is registered: the env's own truncation ends the episode, also at a
+    `max_steps` above the default."""
+    env = gym.make("SocNav-v0", num_humans=0, max_steps=max_steps)
+    assert env.spec.max_episode_steps is None
     env.reset(seed=0)
     ends = []
-    for step in range(1, 202):
+    for step in range(1, max_steps + 1):
         _, _, terminated, truncated, _ = env.step(0)  # stop: the robot never leaves its spot
         if terminated or truncated:
             ends.append((step, terminated, truncated))
-    assert ends == [(201, False, True)]
+    assert ends == [(max_steps, False, True)]
     envs = gym.make_vec("SocNav-v0", num_envs=2)
     assert envs.unwrapped.params.max_steps == 201
 
@@ -204,7 +207,7 @@ def test_the_core_install_is_enough_for_the_environment() -> None:
 
     code = (
         "import sys, gymnasium as gym\n"
-        "env = gym.make('socnav_wm.env:SocNav-v0')\n"
+        "env = gym.make('socnav_wm:SocNav-v0')\n"
         "env.reset(seed=0); env.step(1)\n"
         "heavy = ('torch', 'mlflow', 'dvc', 'pyarrow', 'typer', 'matplotlib', 'rich')\n"
         "print(sorted(m for m in heavy if m in sys.modules))\n"

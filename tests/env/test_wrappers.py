@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-import socnav_wm.env  # noqa: F401 - registers SocNav-v0
+import socnav_wm  # noqa: F401 - registers SocNav-v0
 from socnav_wm.agents.features import sort_humans_by_distance
 from socnav_wm.env import EnvParams, Simulator
 from socnav_wm.env.wrappers import (

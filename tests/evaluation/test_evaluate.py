@@ -13,23 +13,19 @@ import pyarrow.parquet as pq
 import pytest
 
 from socnav_wm.env.core import discrete_commands
-from socnav_wm.evaluation.evaluate import (
-    AGENT_METHODS,
-    BASELINE_METHODS,
+from socnav_wm.evaluation.evaluate import evaluate_method, write_evaluation
+from socnav_wm.evaluation.intervals import mean_ci_crossed
+from socnav_wm.evaluation.records import (
     BASELINE_SEED,
     METADATA_KEY,
-    METHODS,
     OUTCOMES,
     episode_from_trajectories,
-    evaluate_method,
     evaluation_metadata,
     per_seed_means,
     read_evaluation,
     recompute_metrics,
     summarise,
-    write_evaluation,
 )
-from socnav_wm.evaluation.stats import mean_ci_crossed
 from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
 from tests.evaluation.conftest import (
     EPISODES,
@@ -48,15 +44,21 @@ def assert_tables_equal(a: pa.Table, b: pa.Table) -> None:
 
 def test_method_names_match_the_rest_of_the_project():
     from socnav_wm.agents.baselines import BASELINES
-    from socnav_wm.agents.params import VARIANT_NAMES
-    from socnav_wm.evaluation.evaluate import PAPER_METHODS, PLANNER_METHODS
-    from socnav_wm.planning.params import PLANNER_NAMES
+    from socnav_wm.method_names import (
+        BASELINE_NAMES,
+        METHOD_NAMES,
+        PAPER_METHOD_NAMES,
+        PLANNER_NAMES,
+        VARIANT_NAMES,
+    )
+    from socnav_wm.methods import METHODS, names
 
-    assert PAPER_METHODS == VARIANT_NAMES + BASELINE_METHODS
-    assert METHODS == PAPER_METHODS + PLANNER_METHODS
-    assert PLANNER_METHODS == PLANNER_NAMES
-    assert AGENT_METHODS == VARIANT_NAMES
-    assert set(BASELINE_METHODS) == set(BASELINES)
+    assert PAPER_METHOD_NAMES == VARIANT_NAMES + BASELINE_NAMES
+    assert METHOD_NAMES == PAPER_METHOD_NAMES + PLANNER_NAMES == tuple(METHODS)
+    assert names("planner") == PLANNER_NAMES
+    assert names("agent") == VARIANT_NAMES
+    assert names("robot") == BASELINE_NAMES
+    assert set(BASELINE_NAMES) == set(BASELINES)
 
 
 # ------------------------------------------------------------------ aggregation
@@ -310,7 +312,7 @@ def test_agent_evaluation_from_agent_files(tmp_path, one_torch_thread, variant):
     episodes = 4
     result = evaluate_method(
         variant, env_params=TEST_ENV, scenario_seed=SCENARIO_SEED, episodes=episodes,
-        agent_paths=paths,
+        agent_paths=paths, device="cpu",
     )  # fmt: skip
     table = result.episodes
     assert result.training_seeds == (0, 3)
@@ -342,7 +344,7 @@ def test_agent_evaluation_from_agent_files(tmp_path, one_torch_thread, variant):
     # Greedy and seeded: a second evaluation (in other batches) is identical.
     again = evaluate_method(
         variant, env_params=TEST_ENV, scenario_seed=SCENARIO_SEED, episodes=episodes,
-        agent_paths=paths, batch_size=3,
+        agent_paths=paths, batch_size=3, device="cpu",
     )  # fmt: skip
     assert_tables_equal(again.episodes, table)
 
@@ -372,5 +374,10 @@ def test_an_agent_of_another_variant_is_refused(tmp_path, one_torch_thread):
     path = save_tiny_agent(tmp_path / "a.pt", "dueling-dqn", TEST_ENV, 0)
     with pytest.raises(ValueError, match="variant 'dueling-dqn', not 'maspm'"):
         evaluate_method(
-            "maspm", env_params=TEST_ENV, scenario_seed=0, episodes=1, agent_paths={0: path}
+            "maspm",
+            env_params=TEST_ENV,
+            scenario_seed=0,
+            episodes=1,
+            agent_paths={0: path},
+            device="cpu",
         )

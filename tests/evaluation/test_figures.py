@@ -8,16 +8,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
-from socnav_wm.env.rollout import Episode
 from socnav_wm.evaluation.figures import (
     histograms_figure,
     means_figure,
-    scenario_frames,
-    scenarios_gif,
-    smooth,
     training_curves_figure,
 )
+from socnav_wm.evaluation.results import smooth
+from socnav_wm.evaluation.scenes import scenario_frames, scenarios_gif
 from socnav_wm.metrics import PAPER_METRICS
 
 

@@ -15,24 +15,24 @@ import pytest
 from PIL import Image
 from scipy import stats as scipy_stats
 
+from socnav_wm.agents.params import AgentParams
 from socnav_wm.evaluation import paper
 from socnav_wm.evaluation.claims import VERDICTS, check_claims
 from socnav_wm.evaluation.comparisons import clustered_mcnemar, compare, pareto_analysis
-from socnav_wm.evaluation.evaluate import (
-    AGENT_METHODS,
-    BASELINE_SEED,
-    PLANNER_METHODS,
-    EvaluationResult,
-)
-from socnav_wm.evaluation.rendering import fmt_ci
-from socnav_wm.evaluation.report import (
+from socnav_wm.evaluation.evaluate import EvaluationResult
+from socnav_wm.evaluation.formatting import fmt_ci
+from socnav_wm.evaluation.intervals import mean_ci_crossed
+from socnav_wm.evaluation.params import ReportParams
+from socnav_wm.evaluation.records import BASELINE_SEED
+from socnav_wm.evaluation.report import build_report
+from socnav_wm.evaluation.results import (
     MethodEvaluation,
-    build_report,
     load_evaluations,
     load_training_returns,
     training_summary,
 )
-from socnav_wm.evaluation.stats import mcnemar, mean_ci_crossed, wilcoxon_signed_rank
+from socnav_wm.evaluation.stats import mcnemar, wilcoxon_signed_rank
+from socnav_wm.method_names import PLANNER_NAMES, VARIANT_NAMES
 from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
 from tests.evaluation.conftest import (
     EPISODES,
@@ -42,6 +42,12 @@ from tests.evaluation.conftest import (
     set_column,
     write_evaluation_files,
 )
+
+SOLVED = {
+    "solved_window": AgentParams().solved_window,
+    "solved_success_rate": AgentParams().solved_success_rate,
+}
+"""The shipped "solved" criterion (params.yaml's agent section)."""
 
 # ------------------------------------------------------------------ fixtures
 
@@ -90,7 +96,8 @@ def report(baseline_results, tmp_path_factory):
         root / "metrics" / "report.json",
         env_params=TEST_ENV,
         scenario_seed=SCENARIO_SEED,
-        smoothing_window=20,
+        report=ReportParams(smoothing_window=20),
+        **SOLVED,
         gif_size=96,
         gif_max_frames=10,
     )
@@ -224,10 +231,10 @@ def test_report_with_only_baselines_says_what_is_missing(baseline_results, tmp_p
         write_evaluation_files(result, eval_dir, tmp_path / "m")
     result = build_report(
         eval_dir, tmp_path / "no-training", tmp_path / "reports", tmp_path / "report.json",
-        gif_scenarios=(0,), gif_size=64, gif_max_frames=5,
+        report=ReportParams(gif_scenarios=[0]), **SOLVED, gif_size=64, gif_max_frames=5,
     )  # fmt: skip
     assert result.present == ["orca", "sfm"]
-    assert result.absent == [*AGENT_METHODS, *PLANNER_METHODS]
+    assert result.absent == [*VARIANT_NAMES, *PLANNER_NAMES]
     summary = result.summary_path.read_text()
     assert "**Not evaluated: " + ", ".join(result.absent) + ".**" in summary
     assert "`dueling-dqn` was not evaluated: no paired comparisons." in summary
@@ -277,8 +284,9 @@ def test_report_without_any_evaluation(tmp_path):
     stale.parent.mkdir(parents=True)
     stale.write_bytes(b"from an earlier run")
     result = build_report(
-        tmp_path / "nothing", tmp_path / "nothing", tmp_path / "r", tmp_path / "j"
-    )
+        tmp_path / "nothing", tmp_path / "nothing", tmp_path / "r", tmp_path / "j",
+        report=ReportParams(), **SOLVED,
+    )  # fmt: skip
     assert result.present == [] and result.figures == []
     assert not stale.exists()
     assert "No evaluation file was found" in result.summary_path.read_text()
@@ -578,13 +586,13 @@ def test_training_summary_and_logs(tmp_path):
     assert entry["plateau"][4] == pytest.approx(1.0)  # mean of the last 5 returns
     # Episodes 11.. succeed: the last 5 hold 4 successes first at episode 14.
     assert entry["episodes_to_solve"][4] == 14
-    summary = training_summary(logs, window=20)
+    summary = training_summary(logs, window=20, solved_window=100, solved_success_rate=0.95)
     assert summary["maspm"]["plateau"][4] == pytest.approx(0.5)
 
 
 def test_the_planners_are_measured_against_their_ceiling_and_explained():
-    from socnav_wm.evaluation.evaluate import summarise
-    from socnav_wm.evaluation.rendering import planning_section
+    from socnav_wm.evaluation.model_sections import planning_section
+    from socnav_wm.evaluation.records import summarise
 
     n = 40
     hits = np.zeros(n)

@@ -8,19 +8,21 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from socnav_wm.evaluation.intervals import (
+    is_binary,
+    mean_ci,
+    mean_ci_clustered,
+    mean_ci_crossed,
+    wilson_interval,
+)
 from socnav_wm.evaluation.stats import (
     discordant_odds_ratio,
     dominated_by,
     holm,
-    is_binary,
     mcnemar,
-    mean_ci,
-    mean_ci_clustered,
-    mean_ci_crossed,
     paired_proportion_difference,
     pareto_front,
     wilcoxon_signed_rank,
-    wilson_interval,
 )
 
 # ------------------------------------------------------------------ mean_ci

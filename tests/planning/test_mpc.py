@@ -9,7 +9,8 @@ import pytest
 
 from socnav_wm.config import ConfigError, load_params
 from socnav_wm.env.params import EnvParams
-from socnav_wm.evaluation.evaluate import BASELINE_SEED, evaluate_method
+from socnav_wm.evaluation.evaluate import evaluate_method
+from socnav_wm.evaluation.records import BASELINE_SEED
 from socnav_wm.planning.models import ConstantVelocityModel
 from socnav_wm.planning.mpc import FORWARD, LEFT, RIGHT, STOP, Planner, prefixes, towards_goal
 from socnav_wm.planning.params import PlanningParams

@@ -13,17 +13,18 @@ from socnav_wm.env.core import Simulator
 from socnav_wm.env.observation import observe
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_NONE
-from socnav_wm.evaluation.evaluate import BASELINE_SEED, evaluate_method
-from socnav_wm.planning.methods import model_files, planner_policy
+from socnav_wm.evaluation.evaluate import evaluate_method
+from socnav_wm.evaluation.records import BASELINE_SEED
+from socnav_wm.methods import method as lookup
 from socnav_wm.planning.models import ConstantVelocityModel
 from socnav_wm.planning.mpc import Planner, step_gain
 from socnav_wm.planning.oracle import OraclePlanner, clone_simulator
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.planning.vae_lstm import VaeLstmModel
+from socnav_wm.worldmodel.files import save_lstm, save_vae
 from socnav_wm.worldmodel.lstm import LatentLSTM
 from socnav_wm.worldmodel.prediction import model_positions, random_policy, record
 from socnav_wm.worldmodel.residual import ResidualDynamics, ResidualTrainResult, save_residual
-from socnav_wm.worldmodel.training import save_lstm, save_vae
 from socnav_wm.worldmodel.vae import VAE
 
 ENV = EnvParams()
@@ -103,7 +104,7 @@ def observation(sim: Simulator) -> np.ndarray:
 def test_both_planners_go_around_a_human_on_the_straight_path(method: str) -> None:
     env = ENV.replace(human_policy="orca", human_max_speed=1e-6)  # the humans stand
     sim = one_human_ahead(env)
-    policy, reads_simulator = planner_policy(method, env, PlanningParams(), {})
+    policy, reads_simulator = lookup(method).policies(env, planning=PlanningParams())()
     obs = observation(sim)
     nearest, sideways = np.inf, 0.0
     while not sim.state.done[0]:
@@ -223,9 +224,9 @@ def test_learned_planners_evaluate_from_their_files(tmp_path) -> None:
 
 def test_a_missing_or_misplaced_model_file_is_one_line(tmp_path) -> None:
     with pytest.raises(FileNotFoundError, match="train-planning-model"):
-        model_files("wm-mpc", {"planning_model": tmp_path / "nope.pt"})
+        lookup("wm-mpc").files({"planning_model": tmp_path / "nope.pt"})
     with pytest.raises(ValueError, match="reads no vae file"):
-        model_files("cv-mpc", {"vae": tmp_path / "vae.pt"})
+        lookup("cv-mpc").files({"vae": tmp_path / "vae.pt"})
     with pytest.raises(ValueError, match="not a planner"):
         evaluate_method(
             "orca", env_params=ENV, scenario_seed=3, episodes=1,

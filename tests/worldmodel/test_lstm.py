@@ -8,20 +8,16 @@ import pytest
 import torch
 from matplotlib.figure import Figure
 
-from socnav_wm.config import LstmParams
 from socnav_wm.data.shards import RolloutError
 from socnav_wm.data.windows import Windows, make_windows, split_episodes
+from socnav_wm.worldmodel.evaluation import evaluate_lstm
+from socnav_wm.worldmodel.figures import plot_latent_predictions
+from socnav_wm.worldmodel.files import load_lstm, save_lstm, save_vae
 from socnav_wm.worldmodel.fit import fit_lstm
+from socnav_wm.worldmodel.fitting import NonFiniteTrainingError
 from socnav_wm.worldmodel.lstm import LatentLSTM
-from socnav_wm.worldmodel.training import (
-    NonFiniteTrainingError,
-    evaluate_lstm,
-    load_lstm,
-    plot_latent_predictions,
-    save_lstm,
-    save_vae,
-    train_lstm,
-)
+from socnav_wm.worldmodel.params import LstmParams
+from socnav_wm.worldmodel.training import train_lstm
 from socnav_wm.worldmodel.vae import VAE
 from tests.data.test_shards import make_episodes, write_dataset
 
@@ -60,13 +56,15 @@ def train_small(train: Windows, val: Windows, seed: int = 0, max_epochs: int = 4
     return train_lstm(
         train,
         val,
-        hidden_dim=64,
-        learning_rate=1e-2,
-        batch_size=32,
-        max_epochs=max_epochs,
-        patience=8,
+        LstmParams(
+            hidden_dim=64,
+            learning_rate=1e-2,
+            batch_size=32,
+            max_epochs=max_epochs,
+            patience=8,
+            device="cpu",
+        ),
         seed=seed,
-        device="cpu",
     )
 
 
@@ -177,13 +175,15 @@ def test_exploding_learning_rate_stops_the_training_with_one_line() -> None:
         train_lstm(
             train,
             val,
-            hidden_dim=16,
-            learning_rate=1e30,
-            batch_size=32,
-            max_epochs=5,
-            patience=5,
+            LstmParams(
+                hidden_dim=16,
+                learning_rate=1e30,
+                batch_size=32,
+                max_epochs=5,
+                patience=5,
+                device="cpu",
+            ),
             seed=0,
-            device="cpu",
             on_epoch=lambda epoch, _: epochs.append(epoch),
         )
     message = str(error.value)

@@ -9,6 +9,7 @@ import torch
 from socnav_wm.env.params import EnvParams
 from socnav_wm.worldmodel.ego import PREDICTORS
 from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.params import PredictionParams
 from socnav_wm.worldmodel.prediction import (
     MODEL_PREDICTOR,
     prediction_errors,
@@ -66,13 +67,11 @@ def test_bad_windows_are_refused(recording) -> None:
 
 def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_model) -> None:
     from socnav_wm.evaluation.figures import prediction_figure
-    from socnav_wm.evaluation.rendering import prediction_section
+    from socnav_wm.evaluation.model_sections import prediction_section
     from socnav_wm.worldmodel.prediction import evaluate_prediction
 
-    result = evaluate_prediction(
-        ENV, world_model=world_model, agent=None, episodes=5, scenario_seed=3, warmup=2,
-        horizon=3, epsilon=0.1,
-    )  # fmt: skip
+    settings = PredictionParams(episodes=5, scenario_seed=3, warmup=2, horizon=3, epsilon=0.1)
+    result = evaluate_prediction(ENV, settings, world_model=world_model, agent=None)
     assert list(result["policies"]) == ["random"]
     assert result["settings"]["horizon"] == 3
     errors = result["policies"]["random"]["predictors"]
@@ -84,8 +83,7 @@ def test_evaluate_prediction_reports_each_policy_and_draws_them(tmp_path, world_
     assert "| 0 (VAE alone) |" in section and "vae-lstm: goal" in section
     assert "vae-lstm predicts the humans better than constant velocity at" in section
     with pytest.raises(ValueError, match="epsilon"):
-        evaluate_prediction(ENV, world_model=world_model, agent=None, episodes=5,
-                            scenario_seed=3, warmup=2, horizon=3, epsilon=1.5)  # fmt: skip
+        PredictionParams(episodes=5, scenario_seed=3, warmup=2, horizon=3, epsilon=1.5)
 
 
 def _planning_models(count: int, perturbed: bool, max_speed: float | None = None):
@@ -145,7 +143,7 @@ def test_a_perturbed_planning_model_is_measured_worse_and_batch_size_does_not_ma
     assert low <= versus["difference"][-1] <= high
     # The goal is kinematics: exact for the learned model too.
     assert max(many["predictors"][PLANNING_PREDICTOR]["goal"]) < 1e-5
-    from socnav_wm.evaluation.rendering import prediction_section
+    from socnav_wm.evaluation.model_sections import prediction_section
 
     section = "\n".join(
         prediction_section(

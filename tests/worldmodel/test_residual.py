@@ -10,8 +10,10 @@ from socnav_wm.env.params import EnvParams
 from socnav_wm.planning.models import ConstantVelocityModel
 from socnav_wm.planning.mpc import Planner
 from socnav_wm.planning.params import PlanningParams
+from socnav_wm.planning.residual import ResidualPlanningModel
 from socnav_wm.worldmodel import residual
 from socnav_wm.worldmodel.ego import advance, commands_of, positions, predict_positions
+from socnav_wm.worldmodel.params import PlanningModelParams
 from socnav_wm.worldmodel.prediction import random_policy, record
 
 ENV = EnvParams()
@@ -136,8 +138,8 @@ def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> 
         for m in (train, val)
     ]
     result = residual.train_residual(
-        *seqs, ENV, hidden_dim=16, learning_rate=1e-3, batch_size=32, max_epochs=3,
-        patience=2, seed=0,
+        *seqs, ENV, PlanningModelParams(hidden_dim=16, learning_rate=1e-3, batch_size=32,
+        max_epochs=3, patience=2, relative_weight=0.0, room=False), seed=0,
     )  # fmt: skip
     m = result.metrics
     assert m["val_loss"] <= m["val_loss_constant_velocity"]
@@ -155,7 +157,7 @@ def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> 
 
 def test_a_planner_on_the_untrained_model_scores_as_cv_mpc(recording) -> None:
     planning = PlanningParams(horizon=4, prefix_length=2)
-    ours = residual.ResidualPlanningModel(residual.ResidualDynamics(3, 8, ENV.dt), ENV)
+    ours = ResidualPlanningModel(residual.ResidualDynamics(3, 8, ENV.dt), ENV)
     cv = ConstantVelocityModel(ENV)
     for model in (ours, cv):
         model.reset(recording.obs[0])
@@ -232,8 +234,8 @@ def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording
         for m in (train, val)
     ]
     result = residual.train_residual(
-        *seqs, ENV, hidden_dim=16, learning_rate=1e-3, batch_size=32, max_epochs=2,
-        patience=2, seed=0, room=True, relative_weight=0.5,
+        *seqs, ENV, PlanningModelParams(hidden_dim=16, learning_rate=1e-3, batch_size=32,
+        max_epochs=2, patience=2, room=True, relative_weight=0.5), seed=0,
     )  # fmt: skip
     assert result.model.room_half == ENV.spawn_half_size
     assert result.metrics["val_loss"] <= result.metrics["val_loss_constant_velocity"]
@@ -243,7 +245,7 @@ def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording
         residual.residual_positions(result.model, *start)
     with_pose = residual.residual_positions(result.model, *start, pose=v.pose)
     assert np.isfinite(with_pose).all()
-    planner_model = residual.ResidualPlanningModel(result.model, ENV)
+    planner_model = ResidualPlanningModel(result.model, ENV)
     planner_model.reset(v.obs[:2])
     with pytest.raises(ValueError, match="planning.walls"):
         planner_model.rollout(4)
@@ -252,6 +254,6 @@ def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording
     )
     with pytest.raises(ValueError, match="carry no robot poses"):
         residual.train_residual(
-            no_poses, seqs[1], ENV, hidden_dim=8, learning_rate=1e-3, batch_size=32,
-            max_epochs=1, patience=1, seed=0, room=True,
+            no_poses, seqs[1], ENV, PlanningModelParams(hidden_dim=8, learning_rate=1e-3,
+            batch_size=32, max_epochs=1, patience=1, relative_weight=0.0, room=True), seed=0,
         )  # fmt: skip

@@ -9,22 +9,16 @@ import pytest
 import torch
 from matplotlib.figure import Figure
 
-from socnav_wm.config import VaeParams
 from socnav_wm.data.shards import RolloutError
-from socnav_wm.worldmodel import training
+from socnav_wm.worldmodel import evaluation, training
+from socnav_wm.worldmodel.evaluation import encode_observations
+from socnav_wm.worldmodel.figures import plot_reconstruction
+from socnav_wm.worldmodel.files import ModelFileError, load_lstm, load_vae, save_lstm, save_vae
 from socnav_wm.worldmodel.fit import fit_vae
+from socnav_wm.worldmodel.fitting import NonFiniteTrainingError
 from socnav_wm.worldmodel.lstm import LatentLSTM
-from socnav_wm.worldmodel.training import (
-    ModelFileError,
-    NonFiniteTrainingError,
-    encode_observations,
-    load_lstm,
-    load_vae,
-    plot_reconstruction,
-    save_lstm,
-    save_vae,
-    train_vae,
-)
+from socnav_wm.worldmodel.params import VaeParams
+from socnav_wm.worldmodel.training import train_vae
 from socnav_wm.worldmodel.vae import VAE, kl_divergence, vae_loss
 from tests.data.test_shards import make_episodes, write_dataset
 
@@ -40,19 +34,19 @@ def synthetic_observations(n: int, seed: int) -> np.ndarray:
     return obs.astype(np.float32)
 
 
+def cpu_params(**changes) -> VaeParams:
+    """A small VAE on the CPU with the plain ELBO (β = 1); ``changes`` override."""
+    settings = {"latent_dim": 4, "hidden_dim": 32, "kl_weight": 1.0, "learning_rate": 1e-3,
+                "batch_size": 128, "max_epochs": 3, "patience": 5, "device": "cpu"}  # fmt: skip
+    return VaeParams(**{**settings, **changes})
+
+
 def small_training(seed: int = 0, max_epochs: int = 30):
     return train_vae(
         synthetic_observations(2000, seed=1),
         synthetic_observations(400, seed=2),
-        latent_dim=4,
-        hidden_dim=64,
-        kl_weight=1.0,
-        learning_rate=3e-3,
-        batch_size=128,
-        max_epochs=max_epochs,
-        patience=5,
+        cpu_params(hidden_dim=64, learning_rate=3e-3, max_epochs=max_epochs),
         seed=seed,
-        device="cpu",
     )
 
 
@@ -116,15 +110,8 @@ def test_on_epoch_callback_sees_every_epoch() -> None:
     train_vae(
         synthetic_observations(200, 1),
         synthetic_observations(50, 2),
-        latent_dim=2,
-        hidden_dim=16,
-        kl_weight=1.0,
-        learning_rate=1e-3,
-        batch_size=64,
-        max_epochs=3,
-        patience=10,
+        cpu_params(latent_dim=2, hidden_dim=16, batch_size=64, patience=10),
         seed=0,
-        device=torch.device("cpu"),
         on_epoch=lambda epoch, metrics: seen.append(epoch),
     )
     assert seen == [1, 2, 3]
@@ -190,15 +177,8 @@ def test_exploding_learning_rate_stops_the_training_with_one_line() -> None:
         train_vae(
             synthetic_observations(500, seed=1),
             synthetic_observations(100, seed=2),
-            latent_dim=4,
-            hidden_dim=32,
-            kl_weight=1.0,
-            learning_rate=1e30,
-            batch_size=128,
-            max_epochs=5,
-            patience=5,
+            cpu_params(learning_rate=1e30, max_epochs=5),
             seed=0,
-            device="cpu",
             on_epoch=lambda epoch, _: epochs.append(epoch),
         )
     message = _one_line_non_finite(error)
@@ -218,7 +198,8 @@ def test_loss_turning_nan_names_epoch_and_batch(monkeypatch: pytest.MonkeyPatch)
             total = total * math.nan
         return total, recon, kl
 
-    monkeypatch.setattr(training, "vae_loss", nan_on_the_seventh_call)
+    for module in (training, evaluation):  # the training batches and the validation
+        monkeypatch.setattr(module, "vae_loss", nan_on_the_seventh_call)
     with pytest.raises(NonFiniteTrainingError) as error:
         _tiny_vae_training()
     assert _one_line_non_finite(error) == (
@@ -248,15 +229,8 @@ def _tiny_vae_training():
     return train_vae(
         synthetic_observations(500, seed=1),
         synthetic_observations(100, seed=2),
-        latent_dim=4,
-        hidden_dim=32,
-        kl_weight=1.0,
-        learning_rate=1e-3,
-        batch_size=128,
-        max_epochs=3,
-        patience=5,
+        cpu_params(),
         seed=0,
-        device="cpu",
     )
 
 

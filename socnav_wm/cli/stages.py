@@ -1,0 +1,342 @@
+"""The pipeline's commands: one per stage of dvc.yaml (``collect``, ``train-vae``,
+``train-lstm``, ``train-agent``, ``evaluate``, ``report``, ``predict``,
+``train-planning-model``), each calling its :mod:`socnav_wm.stages` function, and ``check`` and
+``deps``, which compare a rerun's metrics and the stages' source dependencies."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from socnav_wm.cli.application import command, print_table
+from socnav_wm.cli.options import SharedOptions, documents_option, shared_options
+from socnav_wm.layout import LAYOUT
+
+AgentsDir = Annotated[Path, typer.Option(help="Agents folder: reads {variant}/seed-{seed}.pt.")]
+Rollouts = Annotated[Path, typer.Option(help="Directory of rollout shards.")]
+ModelOut = Annotated[Path, typer.Option(help="Model file to write.")]
+ValidationMetrics = Annotated[Path, typer.Option(help="Validation metrics (JSON).")]
+History = Annotated[Path, typer.Option(help="Per-epoch losses (JSON, for plots).")]
+ResultsDocuments = documents_option("results")
+
+
+def run_stage(module: str, options: SharedOptions, **arguments: Any) -> None:
+    """Load the params, run :mod:`socnav_wm.stages` ``module`` with ``arguments`` (recording an
+    MLflow run unless ``--no-tracking``), and print its one-line summary."""
+    params = options.load()
+    stage = importlib.import_module(f"socnav_wm.stages.{module}")
+    typer.echo(stage.run(params, tracking=options.tracking, **arguments))
+
+
+@command()
+@shared_options("params", "set", "overlay", "no-tracking", "quiet")
+def collect(
+    options: SharedOptions,
+    out: Annotated[Path, typer.Option(help="Directory of Parquet shards.")] = LAYOUT.rollouts,
+    metrics: Annotated[Path, typer.Option(help="Summary metrics (JSON).")] = LAYOUT.collect_metrics,
+) -> None:
+    """Random-policy rollouts of the simulator into Parquet shards (stage `collect`)."""
+    run_stage("collect", options, out=out, metrics=metrics, quiet=options.quiet)
+
+
+@command("train-vae")
+@shared_options("params", "set", "overlay", "threads", "no-tracking", "quiet", device="vae")
+def train_vae_command(
+    options: SharedOptions,
+    rollouts: Rollouts = LAYOUT.rollouts,
+    out: ModelOut = LAYOUT.vae,
+    metrics: ValidationMetrics = LAYOUT.vae_metrics,
+    history: History = LAYOUT.vae_history,
+) -> None:
+    """Train the VAE (23-d observation → latent) on the rollouts (stage `train-vae`)."""
+    run_stage(
+        "train_vae", options,
+        rollouts=rollouts, out=out, metrics=metrics, history=history, quiet=options.quiet,
+    )  # fmt: skip
+
+
+@command("train-lstm")
+@shared_options("params", "set", "overlay", "threads", "no-tracking", "quiet", device="lstm")
+def train_lstm_command(
+    options: SharedOptions,
+    rollouts: Rollouts = LAYOUT.rollouts,
+    vae: Annotated[Path, typer.Option(help="Trained VAE (frozen here).")] = LAYOUT.vae,
+    out: ModelOut = LAYOUT.lstm,
+    metrics: ValidationMetrics = LAYOUT.lstm_metrics,
+    history: History = LAYOUT.lstm_history,
+) -> None:
+    """Train the LSTM world model on VAE latents of the rollouts (stage `train-lstm`)."""
+    run_stage(
+        "train_lstm", options,
+        rollouts=rollouts, vae=vae, out=out, metrics=metrics, history=history, quiet=options.quiet,
+    )  # fmt: skip
+
+
+@command("train-agent")
+@shared_options("params", "set", "overlay", "threads", "no-tracking", "quiet", device="agent")
+def train_agent_command(
+    *,
+    variant: Annotated[str, typer.Option(help="Agent variant (see `agent` in params.yaml).")],
+    seed: Annotated[int, typer.Option(min=0, help="Training seed.")] = 0,
+    options: SharedOptions,
+    vae: Annotated[Path, typer.Option(help="Frozen VAE.")] = LAYOUT.vae,
+    lstm: Annotated[Path, typer.Option(help="Frozen LSTM.")] = LAYOUT.lstm,
+    out_dir: Annotated[
+        Path, typer.Option(help="Agents folder: writes {variant}/seed-{seed}.pt.")
+    ] = LAYOUT.agents_dir,
+    log_dir: Annotated[
+        Path, typer.Option(help="Training logs: writes {variant}/seed-{seed}.parquet.")
+    ] = LAYOUT.training_logs,
+    metrics_dir: Annotated[
+        Path, typer.Option(help="Summary metrics: writes {variant}/seed-{seed}.json.")
+    ] = LAYOUT.agent_metrics_dir,
+    checkpoint_dir: Annotated[
+        Path, typer.Option(help="Resumable checkpoints (one file per distinct run).")
+    ] = LAYOUT.checkpoints,
+    resume: Annotated[
+        bool, typer.Option(help="Continue from this run's last checkpoint, if there is one.")
+    ] = False,
+    keep_checkpoint: Annotated[
+        bool, typer.Option(help="Keep the checkpoint after the agent file is written.")
+    ] = False,
+) -> None:
+    """Train one Dueling DQN variant with one seed on the frozen world model (stage
+    `train-agent`)."""
+    from socnav_wm.agents.params import check_variant
+
+    check_variant(variant)
+    run_stage(
+        "train_agent",
+        options,
+        variant=variant,
+        seed=seed,
+        vae=vae,
+        lstm=lstm,
+        out_dir=out_dir,
+        log_dir=log_dir,
+        metrics_dir=metrics_dir,
+        checkpoint_dir=checkpoint_dir,
+        resume=resume,
+        keep_checkpoint=keep_checkpoint,
+        quiet=options.quiet,
+    )
+
+
+@command()
+@shared_options("params", "set", "overlay", "threads", "no-tracking", "quiet", device="eval")
+def evaluate(
+    *,
+    method: Annotated[str, typer.Option(help="An agent variant, a baseline or a planner.")],
+    options: SharedOptions,
+    agents_dir: AgentsDir = LAYOUT.agents_dir,
+    out_dir: Annotated[
+        Path, typer.Option(help="Writes {method}.parquet and {method}-trajectories.parquet.")
+    ] = LAYOUT.eval_dir,
+    metrics_dir: Annotated[
+        Path, typer.Option(help="Writes {method}.json.")
+    ] = LAYOUT.eval_metrics_dir,
+    planning_model: Annotated[
+        Path | None,
+        typer.Option(help=f"wm-mpc's planning model [default: {LAYOUT.planning_model(0)}]."),
+    ] = None,
+    vae: Annotated[
+        Path | None, typer.Option(help=f"vae-lstm-mpc's VAE [default: {LAYOUT.vae}].")
+    ] = None,
+    lstm: Annotated[
+        Path | None, typer.Option(help=f"vae-lstm-mpc's LSTM [default: {LAYOUT.lstm}].")
+    ] = None,
+) -> None:
+    """Run one method greedily on the test scenarios: every training seed of an agent
+    (`experiment.seeds`), a baseline, or a planner (cv-mpc, wm-mpc, vae-lstm-mpc, oracle-mpc)
+    (stages `evaluate`, `evaluate_baseline`, `evaluate_planner`, `evaluate_wm_mpc`,
+    `evaluate_vae_lstm_mpc`)."""
+    from socnav_wm.method_names import check_method
+
+    check_method(method, "--method")
+    run_stage(
+        "evaluate",
+        options,
+        method=method,
+        agents_dir=agents_dir,
+        out_dir=out_dir,
+        metrics_dir=metrics_dir,
+        planner_files={
+            role: path
+            for role, path in (("planning_model", planning_model), ("vae", vae), ("lstm", lstm))
+            if path is not None
+        },
+        quiet=options.quiet,
+    )
+
+
+@command()
+@shared_options("params", "set", "overlay", "no-tracking")
+def report(
+    options: SharedOptions,
+    eval_dir: Annotated[Path, typer.Option(help="Evaluation files.")] = LAYOUT.eval_dir,
+    training_dir: Annotated[Path, typer.Option(help="Training logs.")] = LAYOUT.training_logs,
+    out_dir: Annotated[Path, typer.Option(help="Report folder.")] = LAYOUT.reports,
+    metrics: Annotated[
+        Path, typer.Option(help="Machine-readable summary (JSON).")
+    ] = LAYOUT.report_metrics,
+    document: ResultsDocuments = None,
+) -> None:
+    """Table, paired tests, Pareto set, figures and the paper's claims checked; the results
+    table also goes into the results blocks of README.md and docs/evaluation.md (stage
+    `report`), or of the --document files. A report of other evaluations (--eval-dir or
+    --out-dir not the pipeline's) writes no block unless --document names one."""
+    documents = tuple(document) if document is not None else None
+    if documents is None and (eval_dir != LAYOUT.eval_dir or out_dir != LAYOUT.reports):
+        documents = ()  # the README's table is the pipeline's, not another set's
+    run_stage(
+        "report", options,
+        eval_dir=eval_dir, training_dir=training_dir, out_dir=out_dir, metrics=metrics,
+        documents=documents, prediction=LAYOUT.prediction_metrics,
+    )  # fmt: skip
+
+
+@command()
+@shared_options("params", "set", "overlay", "no-tracking", "threads")
+def predict(
+    options: SharedOptions,
+    vae: Annotated[Path, typer.Option(help="The VAE file.")] = LAYOUT.vae,
+    lstm: Annotated[Path, typer.Option(help="The LSTM file.")] = LAYOUT.lstm,
+    agent: Annotated[
+        Path | None,
+        typer.Option(help="Agent file of the ε-greedy policy (default: dueling-dqn seed 0)."),
+    ] = LAYOUT.prediction_agent,
+    planning_model: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="A planning world model file (repeat: one per training seed; default: "
+            f"{LAYOUT.planning_dir.as_posix()}/seed-S.pt for each of planning_model.seeds)."
+        ),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="The errors (JSON).")] = LAYOUT.prediction_metrics,
+    figure: Annotated[Path, typer.Option(help="Error against k (PNG).")] = LAYOUT.prediction_figure,
+) -> None:
+    """k-step prediction errors in metres of the world model (VAE + LSTM) and the planning world
+    model's seeds beside copy-last, static humans and constant velocity (the robot's own motion
+    exact), under the random policy and a trained agent's ε-greedy one, open loop with the true
+    actions; the settings are params.yaml's `prediction` section."""
+    params = options.load()
+    from socnav_wm.evaluation.model_sections import PREDICTION_KS
+    from socnav_wm.stages import predict as stage
+
+    if planning_model is None:
+        planning_model = [LAYOUT.planning_model(s) for s in params.planning_model.seeds]
+    result = stage.run(
+        params,
+        vae=vae,
+        lstm=lstm,
+        agent=agent,
+        planning_models=planning_model,
+        out=out,
+        figure=figure,
+        tracking=options.tracking,
+    )
+    for title, rows, formats in stage.tables(result, PREDICTION_KS):
+        print_table(rows, title, formats)
+    typer.echo(f"wrote {out} and {figure}")
+
+
+@command("train-planning-model")
+@shared_options("params", "set", "overlay", "threads", "no-tracking", "quiet")
+def train_planning_model(
+    options: SharedOptions,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Training seed (one of planning_model.seeds).")
+    ] = 0,
+    rollouts: Annotated[
+        Path, typer.Option(help="The rollouts (collect's output).")
+    ] = LAYOUT.rollouts,
+    out_dir: Annotated[
+        Path, typer.Option(help="Where seed-N.pt is written.")
+    ] = LAYOUT.planning_dir,
+    metrics_dir: Annotated[
+        Path, typer.Option(help="Where seed-N.json is written.")
+    ] = LAYOUT.planning_metrics_dir,
+) -> None:
+    """Train the planning world model (socnav_wm/worldmodel/residual.py: constant velocity plus a
+    learned correction of each human's velocity) on the rollouts (stage `train_planning_model`,
+    params.yaml's planning_model). Its k-step errors are measured by `socnav-wm predict`."""
+    run_stage(
+        "train_planning_model", options,
+        seed=seed, rollouts=rollouts, out_dir=out_dir, metrics_dir=metrics_dir,
+        quiet=options.quiet,
+    )  # fmt: skip
+
+
+@command()
+def check(
+    rerun: Annotated[
+        Path,
+        typer.Argument(help=f"{LAYOUT.eval_metrics_dir.as_posix()} of a rerun (another clone)."),
+    ],
+    committed: Annotated[
+        Path, typer.Option(help="The committed evaluation metrics.")
+    ] = LAYOUT.eval_metrics_dir,
+) -> None:
+    """Compare a rerun's test metrics with the committed ones: each mean within the other's 95%
+    interval (what reproduces across machines), or identical (same CPU, build and threads)."""
+    from socnav_wm.evaluation.reproduce import compare_runs
+
+    checks = compare_runs(committed, rerun)
+    rows = [
+        {
+            "method": c.method,
+            "metric": c.metric,
+            "committed": f"{c.committed['mean']:.4g} [{c.committed['low']:.4g}, "
+            f"{c.committed['high']:.4g}]",
+            "rerun": f"{c.rerun['mean']:.4g} [{c.rerun['low']:.4g}, {c.rerun['high']:.4g}]",
+            "verdict": "identical" if c.identical else "agrees" if c.agrees else "DIFFERS",
+        }
+        for c in checks
+    ]
+    print_table(rows, f"socnav-wm check {rerun} against {committed}", {})
+    differs = sum(not c.agrees for c in checks)
+    typer.echo(f"{len(checks) - differs} of {len(checks)} agree within the 95% intervals")
+    if differs:
+        raise typer.Exit(code=1)
+
+
+@command()
+def deps(
+    check: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="Compare with this dvc.yaml (repeatable: dvc.yaml, studies/dvc.yaml); exit 1 "
+            "if a stage's deps differ."
+        ),
+    ] = None,
+    write: Annotated[
+        list[Path] | None,
+        typer.Option(help="Rewrite the source deps of this dvc.yaml's stages (repeatable)."),
+    ] = None,
+) -> None:
+    """Each stage's source dependencies: the import closure of its module (what dvc.yaml and
+    studies/dvc.yaml list)."""
+    from socnav_wm.stages.deps import dvc_yaml_differences, stage_dependencies, write_dvc_yaml
+
+    if write:
+        for path in write:
+            changed = write_dvc_yaml(path)
+            typer.echo(f"{path}: {'updated' if changed else 'already up to date'}")
+        return
+
+    if check:
+        problems = [line for path in check for line in dvc_yaml_differences(path)]
+        for line in problems:
+            typer.echo(line, err=True)
+        if problems:
+            raise typer.Exit(code=1)
+        files = ", ".join(map(str, check))
+        typer.echo(f"{files}: every stage lists exactly the sources it executes")
+        return
+    for stage, files in stage_dependencies().items():
+        typer.echo(f"{stage}:")
+        for path in files:
+            typer.echo(f"  - {path}")

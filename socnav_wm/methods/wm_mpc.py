@@ -1,0 +1,23 @@
+"""``wm-mpc``: model-predictive control on the learned planning model."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+from socnav_wm.env.params import EnvParams
+from socnav_wm.methods import Method, PolicyFactory
+from socnav_wm.methods.planners import planner_policies
+from socnav_wm.planning.params import PlanningParams
+from socnav_wm.planning.residual import ResidualPlanningModel
+from socnav_wm.worldmodel.residual import load_residual
+
+
+def build(
+    method: Method, env_params: EnvParams, *, files: Mapping[str, Path], planning: PlanningParams
+) -> PolicyFactory:
+    """The planning model ``files["planning_model"]``, loaded for every batch."""
+    path = files["planning_model"]
+    return planner_policies(
+        method, env_params, planning, lambda: ResidualPlanningModel(load_residual(path), env_params)
+    )

@@ -1,0 +1,72 @@
+"""``wm-mpc``'s model: the planning world model (:mod:`socnav_wm.worldmodel.residual`, constant
+velocity plus a learned correction of each human's velocity) as a
+:class:`~.models.PlanningModel`. It follows the episodes as the constant-velocity model does and
+imagines with the learned correction, in float32 without gradients."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import torch
+
+from socnav_wm.env.core import discrete_commands
+from socnav_wm.env.params import EnvParams
+from socnav_wm.planning.models import ConstantVelocityModel, Rollout
+from socnav_wm.worldmodel.residual import ResidualDynamics
+
+
+class _ResidualRollout:
+    def __init__(
+        self,
+        model: ResidualDynamics,
+        points: np.ndarray,
+        velocity: np.ndarray,
+        pose: np.ndarray | None,
+        table: torch.Tensor,
+    ) -> None:
+        self.model, self.table = model, table
+        self.points = torch.as_tensor(points, dtype=torch.float32)
+        self.velocity = torch.as_tensor(velocity, dtype=torch.float32)
+        self.pose = None if pose is None else torch.as_tensor(pose, dtype=torch.float32)
+        self.imagined = 0
+
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        a = torch.as_tensor(np.asarray(actions, dtype=np.int64))
+        with torch.no_grad():
+            self.points, self.velocity, self.pose = self.model.step(
+                self.points,
+                self.velocity,
+                self.table[a, 0],
+                self.table[a, 1],
+                self.pose,
+                self.imagined,
+            )
+        self.imagined += 1
+        return self.points.numpy().astype(np.float64)
+
+
+class ResidualPlanningModel(ConstantVelocityModel):
+    """A :class:`~socnav_wm.planning.models.PlanningModel` that follows the episodes as the
+    constant-velocity one does and imagines with the learned correction (float32). A model
+    that knows the room imagines from the robot's room pose, which the planner passes
+    (``planning.walls``)."""
+
+    def __init__(self, model: ResidualDynamics, params: EnvParams) -> None:
+        super().__init__(params)
+        self.net = copy.deepcopy(model).float().eval()
+        self.table = torch.as_tensor(discrete_commands(params), dtype=torch.float32)
+
+    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
+        if self.net.room_half is not None and pose is None:
+            raise ValueError(
+                "wm-mpc: its planning model knows the room and needs the robot's pose "
+                "(set planning.walls: true)"
+            )
+        return _ResidualRollout(
+            self.net,
+            np.repeat(self._points, repeats, axis=0),
+            np.repeat(self._velocity, repeats, axis=0),
+            None if pose is None else np.repeat(np.asarray(pose), repeats, axis=0),
+            self.table,
+        )

@@ -1,0 +1,115 @@
+"""The paper's world model's files: what a trained VAE or latent LSTM is written as,
+and read back from.
+
+A VAE or LSTM file is a ``torch.save`` of plain values (``format`` :data:`CHECKPOINT_FORMAT`,
+its version, the model's kind, its hyperparameters, CPU weights and ``extra``), written
+atomically and read with ``weights_only=True``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from socnav_wm.devices import resolve_device
+from socnav_wm.io import atomic_path, first_line, load_saved
+from socnav_wm.worldmodel.lstm import LatentLSTM
+from socnav_wm.worldmodel.training import LSTMTrainResult, VAETrainResult
+from socnav_wm.worldmodel.vae import VAE
+
+CHECKPOINT_FORMAT = "socnav-wm-model"
+CHECKPOINT_FORMAT_VERSION = 1
+
+
+class ModelFileError(ValueError):
+    """A model file is missing, unreadable, or not the expected kind (one-line message)."""
+
+
+def _plain(value: Any) -> Any:
+    """``extra`` as plain Python values, so ``torch.load(weights_only=True)`` accepts it."""
+    if isinstance(value, Mapping):
+        return {str(key): _plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(item) for item in value]
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "tolist"):  # numpy scalars/arrays, tensors
+        return value.tolist()
+    return value
+
+
+def _save_model(path: str | Path, kind: str, model: torch.nn.Module, extra: Any) -> None:
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "format_version": CHECKPOINT_FORMAT_VERSION,
+        "kind": kind,
+        "hyperparameters": model.hyperparameters(),  # type: ignore[operator]
+        "state_dict": {key: value.detach().cpu() for key, value in model.state_dict().items()},
+        "extra": _plain(extra or {}),
+    }
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+
+
+def load_checkpoint(path: str | Path, kind: str) -> dict[str, Any]:
+    """Read and check a model file of ``kind`` (``"vae"`` or ``"lstm"``); return its dict.
+
+    The dict holds ``format``, ``format_version``, ``kind``, ``hyperparameters``,
+    ``state_dict`` (CPU tensors) and ``extra``.
+
+    Raises:
+        ModelFileError: one line naming the file when it is missing, unreadable, not a
+            socnav-wm model, of another format version, or of another kind.
+    """
+    payload = load_saved(
+        path, "model file", CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, ModelFileError
+    )
+    if payload.get("kind") != kind:
+        raise ModelFileError(
+            f"{path}: holds a {payload.get('kind')!r} model, expected a {kind!r} model"
+        )
+    return payload
+
+
+def _build(path: Path, payload: dict[str, Any], model_type: type, device: torch.device | str):
+    try:
+        model = model_type(**payload["hyperparameters"])
+        model.load_state_dict(payload["state_dict"])
+    except (KeyError, TypeError, RuntimeError) as exc:
+        raise ModelFileError(f"{path}: weights do not fit the model ({first_line(exc)})") from exc
+    return model.to(resolve_device(device)).eval()
+
+
+def save_vae(
+    path: str | Path, model: VAE | VAETrainResult, extra: Mapping[str, Any] | None = None
+) -> None:
+    """Write a VAE (weights, normalisation buffers, sizes, ``extra``) to ``path`` atomically.
+
+    ``extra`` holds plain values (numbers, strings, lists, dicts; numpy values are converted),
+    e.g. the validation metrics and the data it was trained on.
+    """
+    vae = model.model if isinstance(model, VAETrainResult) else model
+    _save_model(path, "vae", vae, extra)
+
+
+def load_vae(path: str | Path, device: torch.device | str = "cpu") -> VAE:
+    """Load a VAE written by :func:`save_vae`, in eval mode on ``device``."""
+    return _build(Path(path), load_checkpoint(path, "vae"), VAE, device)
+
+
+def save_lstm(
+    path: str | Path,
+    model: LatentLSTM | LSTMTrainResult,
+    extra: Mapping[str, Any] | None = None,
+) -> None:
+    """Write a latent LSTM (weights, sizes, ``extra``) to ``path`` atomically."""
+    lstm = model.model if isinstance(model, LSTMTrainResult) else model
+    _save_model(path, "lstm", lstm, extra)
+
+
+def load_lstm(path: str | Path, device: torch.device | str = "cpu") -> LatentLSTM:
+    """Load a latent LSTM written by :func:`save_lstm`, in eval mode on ``device``."""
+    return _build(Path(path), load_checkpoint(path, "lstm"), LatentLSTM, device)
