@@ -1,7 +1,8 @@
-# Two entry points: `make run` (set up, then the whole pipeline) and `make test` (set up, then
-# the test suite). Both create .venv on first use. torch is installed first and pinned: on the
-# project's machines `torch==2.13.0` is a CPU wheel already on disk, whereas a looser requirement
-# would make pip download a multi-GB CUDA build. Elsewhere, pyproject.toml accepts torch>=2.4.
+# Three entry points: `make models` (set up, then check the shipped trained models), `make run`
+# (set up, then the whole pipeline) and `make test` (set up, then the test suite). Each creates
+# .venv on first use. torch is installed first and pinned: on the project's machines
+# `torch==2.13.0` is a CPU wheel already on disk, whereas a looser requirement would make pip
+# download a multi-GB CUDA build. Elsewhere, pyproject.toml accepts torch>=2.4.
 
 PYTHON ?= python3
 VENV := .venv
@@ -15,7 +16,7 @@ CORES := $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 JOBS ?= $(CORES)
 THREADS ?= $(shell j=$(JOBS); t=$$(( $(CORES) / (j > 0 ? j : 1) )); echo $$(( t > 0 ? t : 1 )))
 
-.PHONY: setup run repro study test lint bench clean
+.PHONY: setup models run repro study test lint bench clean
 
 setup: $(STAMP)
 
@@ -25,6 +26,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet "$(TORCH)"
 	$(BIN)/pip install --quiet -e ".[pipeline,sweep,dev]"
 	touch $(STAMP)
+
+# The trained models a clone ships, without training: git tracks models/ (dvc.yaml's outputs
+# with `cache: false`; data/ stays in DVC's cache). `socnav-wm models` loads each, compares it
+# with dvc.lock and says what `dvc status` says; exit status 1 when one is missing or broken.
+models: $(STAMP)
+	$(BIN)/socnav-wm models
 
 # dvc runs each stage's `socnav-wm …` command, so the venv's bin goes first on PATH.
 # The last line says how long the whole job took (set-up included).

@@ -38,9 +38,9 @@ def main(argv: list[str] | None = None) -> dict[str, int]:
     env_params = EnvParams()
     if args.model:
         from socnav_wm.planning.residual import ResidualPlanningModel
-        from socnav_wm.worldmodel.residual import load_residual
+        from socnav_wm.worldmodel.planning_file import load_residual
 
-        model = ResidualPlanningModel(load_residual(args.model), env_params)
+        model = ResidualPlanningModel(load_residual(args.model, env_params), env_params)
     else:
         model = ConstantVelocityModel(env_params)
     params = PlanningParams(horizon=args.horizon, prefix_length=args.prefix_length)

@@ -12,6 +12,8 @@ of params.yaml), the ones ``socnav-wm evaluate`` runs.
 from __future__ import annotations
 
 import argparse
+import sys
+from typing import NoReturn
 
 import gymnasium as gym
 
@@ -19,16 +21,31 @@ import socnav_wm  # noqa: F401  (registers SocNav-v0)
 from socnav_wm.agents.agent_file import load_agent
 from socnav_wm.config import EvalParams
 
+SHIPPED = "models/agents/maspm/seed-0.pt"
+"""One of the trained agents the repository ships."""
+
+
+def _fail(message: str) -> NoReturn:
+    """One line on stderr and exit status 2, as the socnav-wm commands do."""
+    print(f"run_agent.py: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
 
 def main(argv: list[str] | None = None) -> list[str]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("agent", help="an agent file, e.g. models/agents/dueling-dqn/seed-0.pt")
+    parser.add_argument(
+        "agent", nargs="?", help="an agent file, e.g. models/agents/dueling-dqn/seed-0.pt"
+    )
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--scenario-seed", type=int, default=EvalParams().scenario_seed)
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
     args = parser.parse_args(argv)
-
-    agent = load_agent(args.agent, args.device)
+    if args.agent is None:
+        _fail(f"give an agent file, e.g. {SHIPPED} (`make models` lists them)")
+    try:
+        agent = load_agent(args.agent, args.device)
+    except (ValueError, OSError) as exc:  # missing, unreadable or not an agent: one line
+        _fail(str(exc).splitlines()[0])
     env_options = agent.env_params.to_dict()  # the scenarios the agent was trained on
     env = gym.make("SocNav-v0", **env_options)
     outcomes = []

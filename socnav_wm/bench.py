@@ -150,17 +150,38 @@ def bench_env(
     return rows
 
 
+COLLECT_MAX_EPISODES = 100_000
+"""The most episodes a row of ``bench collect`` runs: a few minutes of one core (about 7 million
+steps), and a few GiB of Parquet at most in the temporary folder."""
+
+
 def bench_collect(
     episodes: int = 2000, num_envs: tuple[int, ...] = (256, 512), seed: int = 0
 ) -> list[dict[str, Any]]:
     """End-to-end speed of the collect stage (simulation, buffering and Parquet writing), per
-    CPU-second of this process."""
+    CPU-second of this process.
+
+    Raises:
+        ValueError: ``episodes`` beyond :data:`COLLECT_MAX_EPISODES`, or more Parquet than the
+            temporary folder's disk has room for (one line, before any work).
+    """
     import tempfile
     from pathlib import Path
 
     from socnav_wm.data.collect import collect_rollouts
+    from socnav_wm.env.observation import observation_size
     from socnav_wm.env.params import EnvParams
+    from socnav_wm.resources import check_disk
 
+    if not 1 <= episodes <= COLLECT_MAX_EPISODES:
+        raise ValueError(
+            f"--episodes: must be in 1..{COLLECT_MAX_EPISODES:,} (a benchmark row of minutes), "
+            f"got {episodes:,}"
+        )
+    env = EnvParams()
+    row_bytes = 8 * (2 * observation_size(env.num_humans) + 8 + 2 * env.num_humans)
+    most = episodes * env.max_steps * row_bytes  # every episode at its longest, uncompressed
+    check_disk("--episodes", most, tempfile.gettempdir(), f"{episodes:,} episodes")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         # Warm-up: compiled kernels and pyarrow's first-use costs are not part of the rate.

@@ -24,10 +24,10 @@ import re
 import typing
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import yaml
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from socnav_wm.agents.baseline_params import BaselinesParams
 from socnav_wm.agents.params import (
@@ -38,12 +38,14 @@ from socnav_wm.data.params import CollectParams
 from socnav_wm.env.params import EnvParams
 from socnav_wm.evaluation.params import EvalParams, ReportParams
 from socnav_wm.io import atomic_path
-from socnav_wm.planning.params import PlanningParams
+from socnav_wm.planning.params import PLANNER_NAMES, PlanningParams
 from socnav_wm.section import (
     Device,
     Section,
+    Seed,
     describe_error,
     one_line,
+    seed_field,
     short_repr,
 )
 from socnav_wm.studies.params import StudyParams, default_studies
@@ -94,7 +96,7 @@ class ConfigError(ValueError):
 class Params(Section):
     """Everything ``params.yaml`` can hold; every section is optional."""
 
-    seed: int = Field(0, ge=0)
+    seed: Seed = seed_field(0)
     """Master seed: every random generator of every stage derives from it."""
     env: EnvParams = Field(default_factory=EnvParams)
     """The simulator's scenario (the paper's by default); see socnav_wm/env/params.py."""
@@ -123,6 +125,23 @@ class Params(Section):
     studies: dict[str, StudyParams] = Field(default_factory=default_studies)
     """Named grids of agent runs (``socnav-wm sweep --study NAME``, ``dvc repro study_NAME``);
     no stage of the default pipeline reads them."""
+
+    @model_validator(mode="after")
+    def _plans_within_an_episode(self) -> Self:
+        # A planner predicts `horizon` steps for every candidate at every step: beyond the
+        # episode's last step there is nothing to plan for, only time to spend (a horizon of
+        # 1,000,000 ran for days).
+        for method in PLANNER_NAMES:
+            horizon = self.planning.resolved(method).horizon
+            if horizon > self.env.max_steps:
+                key = "planning.horizon"
+                if "horizon" in self.planning.per_method.get(method, {}):
+                    key = f"planning.per_method.{method}.horizon"
+                raise ValueError(
+                    f"{key}: {horizon} steps ahead is longer than an episode "
+                    f"(env.max_steps {self.env.max_steps}); at most {self.env.max_steps}"
+                )
+        return self
 
 
 # ---------------------------------------------------------------------------------------------

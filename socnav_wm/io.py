@@ -8,7 +8,7 @@ most a hidden ``.name.tmp-<pid>-<random>`` file, which no reader (or DVC) takes 
 
 from __future__ import annotations
 
-import contextlib
+import errno
 import json
 import math
 import os
@@ -16,17 +16,20 @@ import pickle
 import secrets
 import shutil
 import zipfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "DiskFullError",
+    "ModelFileError",
     "OutputError",
     "atomic_path",
     "check_writable",
     "nearest_existing",
     "outputs_together",
+    "read_json",
     "write_bytes_atomic",
     "write_json_atomic",
     "write_text_atomic",
@@ -35,6 +38,11 @@ __all__ = [
 
 class OutputError(ValueError):
     """An output location cannot be written (one line naming it)."""
+
+
+class ModelFileError(ValueError):
+    """A model file is missing, unreadable, not the expected kind, or made for other scenarios
+    (one-line message naming it)."""
 
 
 def _temp_sibling(target: Path, kind: str) -> Path:
@@ -107,18 +115,145 @@ def nearest_existing(path: str | os.PathLike[str]) -> Path:
     return existing
 
 
-def check_writable(*targets: str | os.PathLike[str]) -> None:
+def check_writable(
+    *targets: str | os.PathLike[str], folders: Collection[str | os.PathLike[str]] = ()
+) -> None:
     """Fail before any work when an output could not be written: for each target, its nearest
-    existing ancestor must be a writable directory (the rest is created). Raises
-    :class:`OutputError` with one line naming the target."""
+    existing ancestor must be a writable directory (the rest is created), and a target that is
+    a file must not be an existing directory (``folders``: the targets that are directories).
+    Raises :class:`OutputError` with one line naming the target."""
+    folder_targets = {Path(folder) for folder in folders}
     for target in map(Path, targets):
         existing = nearest_existing(target.parent)
         if not existing.is_dir():
             raise OutputError(f"{target}: cannot be written ({existing} is not a directory)")
         if not os.access(existing, os.W_OK | os.X_OK):
             raise OutputError(f"{target}: cannot be written ({existing} is not writable)")
+        if target.is_dir() and target not in folder_targets:
+            raise OutputError(f"{target}: is a directory, cannot be written as a file")
         if target.exists() and target.is_file() and not os.access(target, os.W_OK):
             raise OutputError(f"{target}: cannot be written (the file is read-only)")
+
+
+class DiskFullError(OutputError):
+    """The disk filled up while an output was written (one line naming the output)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(f"no space left on device writing {path}")
+        self.path = path
+
+
+def _is_disk_full(exc: BaseException) -> bool:
+    """``exc`` says that a write found the disk full: ENOSPC or EDQUOT, pyarrow's words, or
+    PyTorch's zip writer cut short (``unexpected pos``)."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return True
+    text = str(exc)
+    return "No space left on device" in text or (
+        isinstance(exc, RuntimeError)
+        and any(part in text for part in ("unexpected pos", "PytorchStreamWriter failed"))
+    )
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    path, folder = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
+    return path == folder or folder in path.parents
+
+
+def _last_written(path: Path) -> float:
+    """When ``path`` (a file, or a folder's newest entry) was last written; -1 if absent."""
+    if not path.exists():
+        return -1.0
+    times = [path.stat().st_mtime]
+    if path.is_dir():
+        times += [p.stat().st_mtime for p in path.rglob("*") if p.exists()]
+    return max(times)
+
+
+def _disk_full_target(exc: BaseException, pairs: Sequence[tuple[Path, Path]]) -> Path | None:
+    """The output whose writing ``exc`` interrupted because the disk is full (None if ``exc``
+    is not about a full disk): the one whose temporary ``exc`` names, else the one written
+    last."""
+    named = exc.path if isinstance(exc, DiskFullError) else getattr(exc, "filename", None)
+    if not (isinstance(exc, DiskFullError) or _is_disk_full(exc)):
+        return None
+    if named is not None:
+        for target, tmp in pairs:
+            if _inside(Path(os.fsdecode(named)), tmp):
+                return target
+        if isinstance(exc, DiskFullError):
+            return exc.path
+    latest = max(pairs, key=lambda pair: _last_written(pair[1]))
+    return latest[0]
+
+
+def _check_written(target: Path, tmp: Path) -> None:
+    if not tmp.exists():
+        raise FileNotFoundError(f"atomic_path: nothing was written for {target}")
+    if target.is_dir() and not target.is_symlink() and not tmp.is_dir():
+        raise OutputError(f"{target}: is a directory, cannot be replaced by a file")
+
+
+def _swap_in(target: Path, tmp: Path, keep_old: bool) -> Path | None:
+    """Rename ``tmp`` over ``target``; return where the old target now is (``keep_old``: a
+    copy to restore it from; a replaced directory is always moved aside), or None."""
+    old = None
+    if tmp.is_dir() and (target.exists() or target.is_symlink()):
+        # rename() cannot replace a non-empty directory: move the old one aside first, so the
+        # window without a complete target is one rename long.
+        old = _temp_sibling(target, "old")
+        os.replace(target, old)
+    elif keep_old and target.is_file():
+        old = _temp_sibling(target, "old")
+        try:
+            os.link(target, old)  # the old content stays under a second name: no copy
+        except OSError:
+            shutil.copy2(target, old)
+    try:
+        os.replace(tmp, target)
+    except BaseException:
+        if old is not None and tmp.is_dir():
+            os.replace(old, target)
+        elif old is not None:
+            _remove(old)
+        raise
+    return old
+
+
+def _restore(target: Path, old: Path | None) -> None:
+    """Undo :func:`_swap_in`: the old target back (or none, where there was none)."""
+    if old is None:
+        _remove(target)
+        return
+    if old.is_dir() and (target.exists() or target.is_symlink()):
+        new = _temp_sibling(target, "old")
+        os.replace(target, new)
+        os.replace(old, target)
+        _remove(new)
+    else:
+        os.replace(old, target)
+
+
+def _publish(pairs: Sequence[tuple[Path, Path]]) -> None:
+    """Rename every temporary over its target, or, if one rename fails, none: the targets
+    already replaced get their old content back."""
+    for target, tmp in pairs:
+        _check_written(target, tmp)
+    for _target, tmp in pairs:
+        _fsync_path(tmp)
+    replaced: list[tuple[Path, Path | None]] = []
+    try:
+        for target, tmp in pairs:
+            replaced.append((target, _swap_in(target, tmp, keep_old=len(pairs) > 1)))
+    except BaseException:
+        for target, old in reversed(replaced):
+            _restore(target, old)
+        raise
+    for _target, old in replaced:
+        if old is not None:
+            _remove(old)
+    for folder in dict.fromkeys(target.parent for target, _ in pairs):
+        _fsync_dir(folder)
 
 
 @contextmanager
@@ -128,15 +263,31 @@ def outputs_together(*targets: str | os.PathLike[str]) -> Iterator[list[Path]]:
     The block writes every output at its temporary path; when it succeeds, each temporary is
     renamed over its target, one right after the other (the window in which some outputs are
     new and others old is a few renames long, not the length of the work). When the block
-    raises, every temporary is removed and every target keeps its old content.
+    raises, every temporary is removed and every target keeps its old content; when a rename
+    fails, the targets already renamed get their old content back.
+
+    Raises:
+        DiskFullError: the disk filled up: one line naming the output being written.
+        OutputError: a target is a directory where a file was written.
     """
-    paths = [Path(t) for t in targets]
-    temporaries: list[Path] = []
-    with contextlib.ExitStack() as stack:
-        for path in paths:
-            temporaries.append(stack.enter_context(atomic_path(path)))
-        yield temporaries
-    # leaving the stack has published every temporary, in order
+    pairs = []
+    for target in map(Path, targets):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(target)
+        pairs.append((target, _temp_sibling(target, "tmp")))
+    try:
+        try:
+            yield [tmp for _, tmp in pairs]
+            _publish(pairs)
+        except BaseException as exc:
+            full = _disk_full_target(exc, pairs)
+            if full is None:
+                raise
+            raise DiskFullError(full) from exc
+    except BaseException:
+        for _, tmp in pairs:
+            _remove(tmp)
+        raise
 
 
 def _remove(path: Path) -> None:
@@ -152,37 +303,14 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
 
     Write a file at the yielded path (or create a directory there: a directory replaces the
     target directory as a whole, e.g. a folder of Parquet shards). Parent directories are
-    created. If the block raises, the temporary is removed and ``path`` keeps its old content.
+    created. If the block raises, the temporary is removed and ``path`` keeps its old content;
+    a full disk is :class:`DiskFullError`, one line naming ``path``.
 
     >>> with atomic_path("metrics/vae.json") as tmp:
     ...     tmp.write_text("{}")
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(target)
-    tmp = _temp_sibling(target, "tmp")
-    try:
+    with outputs_together(path) as (tmp,):
         yield tmp
-        if not tmp.exists():
-            raise FileNotFoundError(f"atomic_path: nothing was written for {target}")
-        _fsync_path(tmp)
-        if tmp.is_dir() and target.exists():
-            # rename() cannot replace a non-empty directory: move the old one aside first, so
-            # the window without a complete target is one rename long, then delete it.
-            old = _temp_sibling(target, "old")
-            os.replace(target, old)
-            try:
-                os.replace(tmp, target)
-            except BaseException:
-                os.replace(old, target)
-                raise
-            _remove(old)
-        else:
-            os.replace(tmp, target)
-        _fsync_dir(target.parent)
-    except BaseException:
-        _remove(tmp)
-        raise
 
 
 def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
@@ -220,6 +348,24 @@ def _jsonable(value: Any) -> Any:
     if hasattr(value, "tolist"):  # numpy scalars and arrays, torch tensors
         return _jsonable(value.tolist())
     raise TypeError(f"cannot write {type(value).__name__} as JSON: {value!r}")
+
+
+def read_json(
+    path: str | os.PathLike[str], what: str = "JSON file", error: type[ValueError] = ValueError
+) -> Any:
+    """The content of the JSON file ``path``; otherwise ``error``, one line naming the file: it
+    is missing, unreadable, or not valid JSON (with the place of the first fault)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{path}: no such {what}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: not a readable {what} ({first_line(exc)})") from None
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise error(f"{path}: not valid JSON ({first_line(exc)})") from None
 
 
 def load_torch_file(

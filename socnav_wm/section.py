@@ -10,16 +10,19 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping
-from typing import Any, ClassVar, Literal, Self
+from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 __all__ = [
     "DEVICES",
     "SECTION_CONFIG",
+    "SEED_LIMIT",
     "Device",
     "Section",
+    "Seed",
     "as_tuple",
+    "check_seed",
     "describe_error",
     "describe_errors",
     "distinct_non_negative",
@@ -27,6 +30,7 @@ __all__ = [
     "non_negative",
     "one_line",
     "positive",
+    "seed_field",
     "short_repr",
 ]
 
@@ -219,10 +223,41 @@ def as_tuple(value: Any) -> Any:
     return tuple(value) if isinstance(value, list) else value
 
 
+SEED_LIMIT = 2**63
+"""Seeds are below 2**63: the simulator's compiled kernels take a seed as a 64-bit signed
+integer (a larger one fails to compile, a wider one would be reduced)."""
+
+
+def check_seed(value: int, name: str = "seed") -> int:
+    """``value`` if it is a seed the kernels take (0 ≤ value < 2**63), else a ValueError naming
+    ``name`` in one line."""
+    if not 0 <= value < SEED_LIMIT:
+        raise ValueError(f"{name}: must be in 0..2**63 - 1, got {value}")
+    return value
+
+
+def _seed(value: int) -> int:
+    if value >= SEED_LIMIT:
+        raise ValueError(f"must be < 2**63 (the simulator's seeds are 63-bit), got {value}")
+    return value
+
+
+def seed_field(default: int) -> Any:
+    """A seed field with ``default``: an integer in 0..2**63 - 1."""
+    return Field(default, ge=0)
+
+
+Seed = Annotated[int, AfterValidator(_seed)]
+"""A seed's type (with :func:`seed_field`): below 2**63."""
+
+
 def distinct_non_negative(value: list[int]) -> list[int]:
-    """``value`` (seeds) if none is negative and none is listed twice, else a ValueError."""
+    """``value`` (seeds) if none is negative or 2**63 or more and none is listed twice, else a
+    ValueError."""
     if any(seed < 0 for seed in value):
         raise ValueError(f"must be non-negative, got {value}")
+    if any(seed >= SEED_LIMIT for seed in value):
+        raise ValueError(f"must be < 2**63 (the simulator's seeds are 63-bit), got {value}")
     if len(set(value)) != len(value):
         raise ValueError(f"a seed is listed twice in {value}")
     return value

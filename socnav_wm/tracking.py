@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from socnav_wm.config import flatten
+from socnav_wm.tracking_models import DESCRIPTION_TAG, EXPERIMENT_DESCRIPTION, HEADLINE_TAG
 
 __all__ = [
     "DEFAULT_TRACKING_URI",
@@ -59,6 +60,9 @@ _METRICS_PER_BATCH = 1000
 _METRICS_FLUSH_S = 5.0
 
 _HINT = "set MLFLOW_TRACKING_URI or pass --no-tracking"
+
+Arrays = Mapping[str, Any]
+"""Numpy arrays by name (a model's example inputs or outputs)."""
 
 log = logging.getLogger(__name__)
 
@@ -124,13 +128,24 @@ def check_tracking(uri: str | None = None, *, timeout_s: float = HEALTH_TIMEOUT_
         _check_directory(uri, _file_uri_path(uri))
 
 
-def _check_sqlite(uri: str) -> None:
-    # sqlite:///relative.db, sqlite:////absolute.db, sqlite:// (in memory), maybe ?query
+STORE_LOCK_TIMEOUT_S = 300.0
+"""How long a stage waits for another process to finish creating a SQLite store."""
+
+
+def _sqlite_database(uri: str) -> Path | None:
+    """The database of ``sqlite:///relative.db`` or ``sqlite:////absolute.db`` (maybe with a
+    ``?query``); None for another scheme or in memory (``sqlite://``)."""
+    if not uri.lower().startswith("sqlite://"):
+        return None
     rest = uri[len("sqlite://") :].split("?", 1)[0]
     database = rest[1:] if rest.startswith("/") else rest
-    if database in ("", ":memory:"):
+    return None if database in ("", ":memory:") else Path(database)
+
+
+def _check_sqlite(uri: str) -> None:
+    db_path = _sqlite_database(uri)
+    if db_path is None:
         return
-    db_path = Path(database)
     directory = db_path.parent.resolve()
     if not directory.is_dir():
         _fail(uri, f"directory {directory} does not exist")
@@ -245,17 +260,27 @@ class Run:
     def log_model(
         self,
         module: Any,
-        inputs: Mapping[str, Any],
-        outputs: Mapping[str, Any],
+        inputs: Arrays,
+        outputs: Arrays,
         name: str = "model",
-    ) -> None:
-        """Save a torch module in MLflow's PyTorch format as the artifact folder ``name``
-        (``mlflow.pytorch.load_model("runs:/<run id>/model")`` loads it back), with the signature
-        of the example ``inputs`` and ``outputs`` (numpy arrays by name: dtypes, and shapes
-        whose first dimension, the batch, may vary)."""
+        *,
+        model_type: str | None = None,
+        tags: Mapping[str, Any] | None = None,
+        variable_axes: int = 1,
+    ) -> str | None:
+        """The logged model ``name`` of this run, and its id (None when tracking is off):
+        :func:`socnav_wm.tracking_models.log_logged_model`."""
+        return None
 
     def set_tag(self, key: str, value: Any) -> None:
         """Set a run tag."""
+
+    def log_headline(
+        self, metrics: Mapping[str, float], units: Mapping[str, str] | None = None
+    ) -> None:
+        """The few metrics a user compares first: logged (step 0) unless they already are,
+        named in order in the tag ``headline_metrics``, and written with their ``units`` as the
+        run's description, which MLflow's UI shows above everything else."""
 
     def flush(self) -> None:
         """Send buffered metrics now."""
@@ -275,11 +300,14 @@ class _MlflowRun(Run):
         self.run_id = run_id
         self._pending: list[Any] = []
         self._last_flush = time.monotonic()
+        self._final: set[str] = set()  # the metrics logged at step 0
 
     def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
         from mlflow.entities import Metric
 
         timestamp = int(time.time() * 1000)
+        if not step:
+            self._final.update(map(str, metrics))
         self._pending.extend(
             Metric(key=str(key), value=float(value), timestamp=timestamp, step=int(step or 0))
             for key, value in metrics.items()
@@ -319,39 +347,39 @@ class _MlflowRun(Run):
     def log_model(
         self,
         module: Any,
-        inputs: Mapping[str, Any],
-        outputs: Mapping[str, Any],
+        inputs: Arrays,
+        outputs: Arrays,
         name: str = "model",
-    ) -> None:
-        import tempfile
+        *,
+        model_type: str | None = None,
+        tags: Mapping[str, Any] | None = None,
+        variable_axes: int = 1,
+    ) -> str | None:
+        from socnav_wm.tracking_models import log_logged_model
 
-        import mlflow.pytorch
-        import torch
-        from mlflow.models import infer_signature
-
-        signature = infer_signature(dict(inputs), dict(outputs))
-        # Pickle, not MLflow's pt2 graph (traced at the example's fixed batch size): the module
-        # is the pipeline's own, so its warning on loading untrusted pickles is left out here.
-        pytorch_log = logging.getLogger("mlflow.pytorch")
-        level = pytorch_log.level
-        pytorch_log.setLevel(logging.ERROR)
-        try:
-            with tempfile.TemporaryDirectory() as tmp:
-                local = Path(tmp) / name
-                # The requirement is given: inferring it would load the model in a subprocess.
-                mlflow.pytorch.save_model(
-                    module,
-                    str(local),
-                    signature=signature,
-                    serialization_format="pickle",  # the nn.Module, as load_model returns it
-                    pip_requirements=[f"torch=={torch.__version__.split('+')[0]}"],
-                )
-                self._client.log_artifacts(self.run_id, str(local), name)
-        finally:
-            pytorch_log.setLevel(level)
+        self.flush()  # the final metrics, linked to the model, must be in the store first
+        return log_logged_model(
+            self._client,
+            self.run_id,
+            module,
+            (inputs, outputs, variable_axes),
+            name=name,
+            model_type=model_type,
+            tags={str(k): _truncate(str(v), _MAX_TAG_VALUE) for k, v in (tags or {}).items()},
+        )
 
     def set_tag(self, key: str, value: Any) -> None:
         self._client.set_tag(self.run_id, key, _truncate(str(value), _MAX_TAG_VALUE))
+
+    def log_headline(
+        self, metrics: Mapping[str, float], units: Mapping[str, str] | None = None
+    ) -> None:
+        values = {str(key): float(value) for key, value in metrics.items()}
+        self.log_metrics({key: value for key, value in values.items() if key not in self._final})
+        self.set_tag(HEADLINE_TAG, ",".join(values))
+        units = units or {}
+        shown = (f"{k} {v:.4g} {units.get(k, '')}".rstrip() for k, v in values.items())
+        self.set_tag(DESCRIPTION_TAG, "; ".join(shown))
 
     def link_runs(self, key: str, stages: Sequence[str]) -> list[str]:
         experiment = self._client.get_run(self.run_id).info.experiment_id
@@ -414,8 +442,14 @@ def stage_run(
     _quiet_database_logs()
     from mlflow import MlflowClient
 
-    client = MlflowClient(tracking_uri=uri)
-    experiment_id = _experiment_id(client, uri)
+    from socnav_wm.locks import LockTimeout, waiting_lock
+
+    try:  # opening a SQLite store creates or migrates it: one process at a time (locks.py)
+        with waiting_lock(_sqlite_database(uri), STORE_LOCK_TIMEOUT_S):
+            client = MlflowClient(tracking_uri=uri)
+            experiment_id = _experiment_id(client, uri)
+    except LockTimeout:
+        raise TrackingError(f"{_redact(uri)}: another process kept creating it; {_HINT}") from None
     commit = _git_commit()
     tags = {
         "stage": stage,
@@ -497,13 +531,19 @@ def _experiment_id(client: Any, uri: str) -> str:
                 name,
                 artifact_location=_artifact_location(uri),
                 # MLflow 3 opens an experiment of this kind in its model-training view.
-                tags={EXPERIMENT_KIND_TAG: EXPERIMENT_KIND},
+                tags={
+                    EXPERIMENT_KIND_TAG: EXPERIMENT_KIND,
+                    DESCRIPTION_TAG: EXPERIMENT_DESCRIPTION,
+                },
             )
         experiment = client.get_experiment_by_name(name)
         if experiment is None:
             raise TrackingError(f"{_redact(uri)}: cannot create the experiment {name!r}; {_HINT}")
-    elif EXPERIMENT_KIND_TAG not in experiment.tags:
-        client.set_experiment_tag(experiment.experiment_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
+    else:
+        for key, value in ((EXPERIMENT_KIND_TAG, EXPERIMENT_KIND),
+                           (DESCRIPTION_TAG, EXPERIMENT_DESCRIPTION)):  # fmt: skip
+            if key not in experiment.tags:  # an older store's experiment
+                client.set_experiment_tag(experiment.experiment_id, key, value)
     _check_artifact_store(uri, experiment.artifact_location)
     return experiment.experiment_id
 

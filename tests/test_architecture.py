@@ -20,6 +20,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "socnav_wm",
         "socnav_wm.section",
         "socnav_wm.io",
+        "socnav_wm.locks",
         "socnav_wm.progress",
         "socnav_wm.resources",
         "socnav_wm.devices",
@@ -40,7 +41,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("socnav_wm.evaluation", "socnav_wm.evaluation.*"),  # 6: paired tests, the report
     ("socnav_wm.studies.params",),  # 7: the studies' section, composed by the configuration
     ("socnav_wm.config",),  # 8: composes the sections, loads params.yaml
-    ("socnav_wm.tracking",),  # 9: MLflow
+    ("socnav_wm.tracking", "socnav_wm.tracking_models"),  # 9: MLflow
     ("socnav_wm.stages", "socnav_wm.stages.*"),  # 10: one module per DVC stage
     ("socnav_wm.studies", "socnav_wm.studies.*", "socnav_wm.bench"),  # 11: grids, benchmarks
     ("socnav_wm.cli", "socnav_wm.cli.*"),  # 12: the command line

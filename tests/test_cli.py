@@ -172,7 +172,7 @@ def test_train_planning_model_trains_and_writes_its_outputs(tmp_path: Path) -> N
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "constant velocity" in result.output and "wrote" in result.output
-    from socnav_wm.worldmodel.residual import load_residual
+    from socnav_wm.worldmodel.planning_file import load_residual
 
     assert load_residual(tmp_path / "models" / "seed-1.pt").net[0].out_features == 8
     metrics = json.loads((tmp_path / "metrics" / "seed-1.json").read_text())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -191,3 +192,16 @@ def test_a_queued_experiment_keeps_its_mlflow_runs(repo: Path) -> None:
     assert [run.data.tags["stage"] for run in runs] == ["collect"]
     assert runs[0].data.tags["dvc_exp_name"] == "queued-collect"
     assert runs[0].info.status == "FINISHED"
+
+
+def test_a_parameter_changed_by_dvc_exp_run_is_tracked_and_one_set_by_set_is_not(
+    repo: Path,
+) -> None:
+    """The README's rule: `--set` is for quick runs outside DVC's tracking; `dvc exp run -S`
+    changes params.yaml, so `dvc params diff` (and `dvc exp show`) see it."""
+    _run(repo, "socnav-wm", "collect", "--set", "collect.episodes=6", "--no-tracking", "--quiet")
+    assert "collect.episodes" not in _dvc(repo, "params", "diff")
+    _dvc(repo, "exp", "run", "-S", "collect.episodes=12", "collect")
+    diff = _dvc(repo, "params", "diff")
+    assert re.search(r"collect\.episodes\s+40\s+12", diff), diff
+    assert "collect.episodes" in _dvc(repo, "exp", "show", "--csv")

@@ -145,3 +145,28 @@ def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: 
     agents = {stage for stage in status if stage.startswith("train_agent@")}
     assert agents and runs_the_simulator | agents <= stale["socnav_wm/env/reward.py"]
     assert not {"train_vae", "train_lstm"} & stale["socnav_wm/env/reward.py"]
+
+
+def test_every_output_of_dvc_yaml_is_a_layout_path() -> None:
+    """dvc.yaml names the files the CLI writes by default: each stage's outs and metrics are
+    LAYOUT's paths (files in its folders, a model's parameters file), so that a moved default
+    fails here."""
+    from dataclasses import fields
+
+    from socnav_wm.layout import LAYOUT
+    from socnav_wm.stages.common import config_path
+
+    known: list[Path] = []
+    for item in fields(LAYOUT):
+        value = getattr(LAYOUT, item.name)
+        known += list(value) if isinstance(value, tuple) else [value]
+    known += [config_path(path) for path in known]  # a model's resolved parameters beside it
+    spec = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+    outputs = []
+    for stage in spec.values():
+        body = stage.get("do", stage)
+        for entry in (body.get("outs") or []) + (body.get("metrics") or []):
+            outputs.append(Path(entry if isinstance(entry, str) else next(iter(entry))))
+    assert outputs
+    strays = [o for o in outputs if not any(o == k or k in o.parents for k in known)]
+    assert strays == []

@@ -94,3 +94,18 @@ def test_plan_with_constant_velocity_and_with_a_trained_planning_model(tiny, cap
     assert sum(load("plan").main([*small, "--model", str(model)]).values()) == 3
     out = capsys.readouterr().out
     assert "ConstantVelocityModel" in out and "ResidualPlanningModel" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ([], "give an agent file, e.g. models/agents/maspm/seed-0.pt"),
+        (["no/such.pt"], "no/such.pt: no such agent file"),
+    ],
+)
+def test_run_agent_without_an_agent_file_says_so_in_one_line(args, message, capsys) -> None:
+    with pytest.raises(SystemExit) as ended:
+        load("run_agent").main(args)
+    assert ended.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0]

@@ -61,27 +61,20 @@ def test_collect_vae_lstm_write_every_output_and_mlflow_runs(workdir: Path) -> N
     )
     assert len(client.get_metric_history(vae_run.info.run_id, "val_loss")) == 3
     artifacts = {a.path for a in client.list_artifacts(vae_run.info.run_id)}
-    assert {"vae.pt", "vae.params.yaml", "figures", "model"} <= artifacts
-    # The models in MLflow's PyTorch format, with their signatures, equal the pipeline's files.
+    assert {"vae.pt", "vae.params.yaml", "figures"} <= artifacts
+    # The models as MLflow logged models of their runs (tests/test_logged_models.py checks
+    # them all), with the weights of the pipeline's files.
     import mlflow.pytorch
-    from mlflow.models import get_model_info
 
     from socnav_wm.worldmodel.files import load_lstm, load_vae
 
     lstm_run = next(run for run in runs if run.data.tags["stage"] == "train-lstm")
-    for run, inputs, outputs in (
-        (vae_run, ["obs"], ["recon", "mu", "logvar"]),
-        (lstm_run, ["z", "actions"], ["z_next"]),
-    ):
-        signature = get_model_info(f"runs:/{run.info.run_id}/model").signature
-        assert [spec.name for spec in signature.inputs] == inputs
-        assert [spec.name for spec in signature.outputs] == outputs
     vae = load_vae(workdir / "models/vae.pt")
-    logged = mlflow.pytorch.load_model(f"runs:/{vae_run.info.run_id}/model")
+    logged = mlflow.pytorch.load_model(f"runs:/{vae_run.info.run_id}/vae").vae
     obs = torch.randn(5, vae.input_dim, dtype=vae.mu_head.weight.dtype)
     assert torch.equal(logged.encode(obs)[0], vae.encode(obs)[0])
     lstm = load_lstm(workdir / "models/lstm.pt")
-    logged = mlflow.pytorch.load_model(f"runs:/{lstm_run.info.run_id}/model")
+    logged = mlflow.pytorch.load_model(f"runs:/{lstm_run.info.run_id}/lstm").lstm
     pairs = zip(logged.parameters(), lstm.parameters(), strict=True)
     assert all(torch.equal(a, b) for a, b in pairs)
 
@@ -246,19 +239,14 @@ def test_agents_evaluation_and_report_write_every_output(workdir: Path) -> None:
     ]  # fmt: skip
     assert agents[0].data.params["variant"] == agents[0].data.tags["variant"]
     assert "machine.cpu" in agents[0].data.tags and "machine.torch_threads" in agents[0].data.tags
-    # The Q-network in MLflow's PyTorch format, with its signature: the agent file's weights.
+    # The agent as a logged model of its run: the agent file's Q-network in a greedy policy.
     import mlflow.pytorch
-    from mlflow.models import get_model_info
 
     from socnav_wm.agents.agent_file import load_agent
 
     maspm_run = trained["train-agent/2stepahead-maspm/seed-0"]
-    signature = get_model_info(f"runs:/{maspm_run}/model").signature
-    assert [s.name for s in signature.inputs] == ["features"]
-    assert [s.name for s in signature.outputs] == ["q_values"]
     q = load_agent(workdir / "models/agents/2stepahead-maspm/seed-0.pt").q_network
-    assert signature.inputs.inputs[0].shape == (-1, q.input_dim)
-    logged = mlflow.pytorch.load_model(f"runs:/{maspm_run}/model")
+    logged = mlflow.pytorch.load_model(f"runs:/{maspm_run}/2stepahead-maspm-seed-0").q_network
     features = torch.randn(3, q.input_dim, dtype=next(q.parameters()).dtype)
     assert torch.equal(logged(features), q(features))
     experiment = client.get_experiment_by_name("socnav-wm")

@@ -283,3 +283,19 @@ def test_the_experiment_opens_in_mlflow_3s_model_training_view(sqlite_uri: str) 
         pass
     experiment = mlflow.tracking.MlflowClient().get_experiment_by_name("socnav-wm")
     assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
+
+
+def test_headline_metrics_are_the_runs_description(sqlite_uri: str) -> None:
+    """The UI's first view: the experiment's description, and each run's few headline metrics
+    (tagged, and its description), each metric logged once."""
+    with stage_run("evaluate/orca", {}) as run:
+        run.log_metrics({"success": 0.9, "success_ci_low": 0.8})
+        run.log_headline({"success": 0.9, "simulation_time": 31.5}, units={"simulation_time": "s"})
+    result = get_run(run.run_id)
+    assert result.data.tags["headline_metrics"] == "success,simulation_time"
+    assert result.data.tags["mlflow.note.content"] == "success 0.9; simulation_time 31.5 s"
+    client = mlflow.tracking.MlflowClient()
+    assert len(client.get_metric_history(run.run_id, "success")) == 1
+    assert result.data.metrics["simulation_time"] == 31.5
+    experiment = client.get_experiment_by_name("socnav-wm")
+    assert "headline_metrics" in experiment.tags["mlflow.note.content"]

@@ -19,12 +19,13 @@ import torch
 from socnav_wm.agents.dueling import DuelingQNetwork
 from socnav_wm.agents.features import VARIANTS, Variant, make_variant
 from socnav_wm.agents.params import AgentParams, check_variant
+from socnav_wm.data.compatibility import check_made_with
 from socnav_wm.devices import resolve_device
 from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.rollout import run_episodes
 from socnav_wm.io import atomic_path, first_line, load_saved
-from socnav_wm.worldmodel.files import load_lstm, load_vae
+from socnav_wm.worldmodel.files import load_vae_lstm
 from socnav_wm.worldmodel.lstm import LatentLSTM
 from socnav_wm.worldmodel.vae import VAE
 
@@ -100,13 +101,15 @@ def load_world_model(
     vae_path: str | Path | None,
     lstm_path: str | Path | None,
     device: torch.device | str,
+    env_params: EnvParams | None = None,
 ) -> tuple[VAE | None, LatentLSTM | None]:
-    """The frozen VAE and LSTM a variant needs (None, None for ``dueling-dqn``)."""
+    """The frozen VAE and LSTM a variant needs (None, None for ``dueling-dqn``), refused in one
+    line when they were trained for other scenarios than ``env_params``."""
     if not VARIANTS[check_variant(variant)].needs_world_model:
         return None, None
     if vae_path is None or lstm_path is None:
         raise ValueError(f"variant {variant!r} needs the VAE and LSTM files (got no path)")
-    return load_vae(vae_path, device), load_lstm(lstm_path, device)
+    return load_vae_lstm(vae_path, lstm_path, device, env_params)
 
 
 @dataclass
@@ -201,15 +204,21 @@ def save_agent(path: str | Path, result: TrainResult, extra: dict[str, Any] | No
         torch.save(payload, tmp)
 
 
-def load_agent(path: str | Path, device: torch.device | str = "cpu") -> Agent:
+def load_agent(
+    path: str | Path, device: torch.device | str = "cpu", env_params: EnvParams | None = None
+) -> Agent:
     """Load an agent written by :func:`save_agent`, on ``device`` (``auto``/``cpu``/``cuda``).
 
     Raises:
         AgentFileError: one line naming the file when it is missing, unreadable, not an agent
-            file, of another format version, or when its weights do not fit.
+            file, of another format version, trained for other scenarios than ``env_params``
+            (another number of humans or room size; None: not checked), or when its weights
+            do not fit.
     """
     path = Path(path)
     payload = load_saved(path, "agent file", AGENT_FORMAT, AGENT_FORMAT_VERSION, AgentFileError)
+    made = payload.get("env_params") if isinstance(payload.get("env_params"), dict) else None
+    check_made_with(path, made, env_params, error=AgentFileError)
     target = resolve_device(device)
     try:
         params = AgentParams.from_dict(payload["params"])

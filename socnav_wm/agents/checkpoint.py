@@ -17,8 +17,9 @@ from socnav_wm.env.params import EnvParams
 from socnav_wm.io import atomic_path, load_saved
 
 CHECKPOINT_FORMAT = "socnav-wm-agent-checkpoint"
-CHECKPOINT_FORMAT_VERSION = 4
-"""4: the training state as one object (an autograd learner: one tensor per parameter)."""
+CHECKPOINT_FORMAT_VERSION = 5
+"""5: the optimiser's state is one flat tensor over all parameters (4: the training state as
+one object, an autograd learner with one tensor per parameter)."""
 
 
 def _file_digest(path: str | Path | None) -> str | None:

@@ -90,6 +90,16 @@ class DuelingQNetwork(nn.Module):
         hidden = self.trunk(features)
         return dueling_q_values(self.value(hidden), self.advantage(hidden))
 
+    def greedy_actions(self, features: torch.Tensor) -> torch.Tensor:
+        """``argmax_a Q(s, a)`` (batch,) without the value stream.
+
+        ``V(s)`` and ``mean_a A(s, a)`` are the same for every action, so the action with the
+        largest Q-value is the one with the largest advantage: the trunk and the advantage
+        stream decide it (the learner's Double-DQN target and acting use this; ties aside,
+        floating-point rounding is all that can make it differ from ``forward(…).argmax``).
+        """
+        return self.advantage(self.trunk(features)).argmax(dim=1)
+
 
 def dueling_q_values(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
     """``Q = V + A − mean(A)``: value (batch, 1), advantage (batch, actions) → (batch, actions).

@@ -276,6 +276,15 @@ class Variant:
         self.state = WorldModelState(h, c)
         return next_features, current
 
+    def keep(self, rows: np.ndarray) -> None:
+        """Keep the per-env state of ``rows`` alone, in that order (the other envs' episodes have
+        ended and leave the batch); the next :meth:`step` gets the observations of ``rows``."""
+        if self.state is None:
+            raise RuntimeError("call reset(obs) before keep()")
+        index = torch.as_tensor(np.asarray(rows, dtype=np.int64), device=self.device)
+        self.state = _select_rows(self.state, index)
+        self.num_envs = int(index.numel())
+
     # -- checkpoints ---------------------------------------------------------------------------
 
     def state_dict(self) -> dict[str, torch.Tensor]:

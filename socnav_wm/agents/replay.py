@@ -1,11 +1,14 @@
 """Uniform experience replay in preallocated arrays, returning typed batches of tensors, and the
 per-environment accumulator that turns one-step transitions into n-step ones.
 
-Storage is numpy, allocated once with ``np.zeros``: the operating system hands out zeroed pages
-lazily, so a 1M-transition buffer (the paper's MASPM setting) costs memory only as it fills.
-A sampled batch is gathered in numpy and moved to the learner's device in one copy per field.
-Sampling draws indices from the buffer's own numpy ``Generator``, whose state is part of
-:meth:`ReplayBuffer.state_dict`, so a resumed run samples exactly what an uninterrupted one would.
+Storage is one numpy table of float32 rows, allocated once with ``np.zeros``: the operating
+system hands out zeroed pages lazily, so a 1M-transition buffer (the paper's MASPM setting) costs
+memory only as it fills. A row holds a whole transition (features, next features, reward,
+terminal flag, discount, and the action, an integer below 2²⁴ and so exact as a float32), so a
+sampled batch is one indexed gather and one copy to the learner's device; the batch's fields
+are views of it. Sampling draws indices from the buffer's own numpy ``Generator``, whose state is
+part of :meth:`ReplayBuffer.state_dict`, so a resumed run samples exactly what an uninterrupted
+one would.
 """
 
 from __future__ import annotations
@@ -57,6 +60,9 @@ class ReplayBuffer:
         feature_dim: size of the feature vectors.
         device: where sampled batches go.
         seed: seed of the sampling generator (a numpy ``Generator``).
+
+    The fields (``features``, ``next_features``, ``rewards``, ``terminals``, ``discounts``,
+    ``actions``) are column views of one table; ``actions`` holds the action numbers as floats.
     """
 
     def __init__(
@@ -72,12 +78,16 @@ class ReplayBuffer:
         self.feature_dim = int(feature_dim)
         self.device = torch.device(device)
         self.rng = np.random.default_rng(seed)
-        self.features = np.zeros((self.capacity, self.feature_dim), dtype=np.float32)
-        self.next_features = np.zeros((self.capacity, self.feature_dim), dtype=np.float32)
-        self.actions = np.zeros(self.capacity, dtype=np.int64)
-        self.rewards = np.zeros(self.capacity, dtype=np.float32)
-        self.terminals = np.zeros(self.capacity, dtype=np.float32)
-        self.discounts = np.zeros(self.capacity, dtype=np.float32)
+        f = self.feature_dim
+        self.table = np.zeros((self.capacity, 2 * f + 4), dtype=np.float32)
+        """One row per transition: features | next_features | reward | terminal | discount |
+        action."""
+        self.features = self.table[:, :f]
+        self.next_features = self.table[:, f : 2 * f]
+        self.rewards = self.table[:, 2 * f]
+        self.terminals = self.table[:, 2 * f + 1]
+        self.discounts = self.table[:, 2 * f + 2]
+        self.actions = self.table[:, 2 * f + 3]
         self.position = 0
         """Index the next transition is written to."""
         self.size = 0
@@ -85,9 +95,9 @@ class ReplayBuffer:
 
     @staticmethod
     def bytes_needed(capacity: int, feature_dim: int) -> int:
-        """What a buffer of these sizes allocates: two float32 feature rows, an int64 action
-        and three float32 scalars per transition."""
-        return int(capacity) * (2 * 4 * int(feature_dim) + 8 + 3 * 4)
+        """What a buffer of these sizes allocates: a row of two float32 feature vectors and four
+        float32 scalars per transition."""
+        return int(capacity) * 4 * (2 * int(feature_dim) + 4)
 
     def __len__(self) -> int:
         return self.size
@@ -116,13 +126,16 @@ class ReplayBuffer:
             )
         if n > self.capacity:
             raise ValueError(f"cannot add {n} transitions to a buffer of capacity {self.capacity}")
-        index = (self.position + np.arange(n)) % self.capacity
-        self.features[index] = features
-        self.next_features[index] = _as_numpy(next_features)
-        self.actions[index] = _as_numpy(actions)
-        self.rewards[index] = _as_numpy(rewards)
-        self.terminals[index] = _as_numpy(terminals)
-        self.discounts[index] = _as_numpy(discounts)
+        start = self.position
+        rows = slice(start, start + n)
+        if start + n > self.capacity:  # wraps around: write through an index
+            rows = (start + np.arange(n)) % self.capacity
+        self.features[rows] = features
+        self.next_features[rows] = _as_numpy(next_features)
+        self.actions[rows] = _as_numpy(actions)
+        self.rewards[rows] = _as_numpy(rewards)
+        self.terminals[rows] = _as_numpy(terminals)
+        self.discounts[rows] = _as_numpy(discounts)
         self.position = int((self.position + n) % self.capacity)
         self.size = min(self.size + n, self.capacity)
 
@@ -134,18 +147,17 @@ class ReplayBuffer:
         return self.gather(index)
 
     def gather(self, index: np.ndarray) -> Batch:
-        """The transitions at ``index`` (stored positions), as a :class:`Batch` on device."""
-
-        def to_device(array: np.ndarray) -> torch.Tensor:
-            return torch.from_numpy(array).to(self.device, non_blocking=True)
-
+        """The transitions at ``index`` (stored positions), as a :class:`Batch` on device: one
+        gather of whole rows, one copy to the device, and the fields as views of it."""
+        rows = torch.from_numpy(self.table[index]).to(self.device, non_blocking=True)
+        f = self.feature_dim
         return Batch(
-            features=to_device(self.features[index]),
-            actions=to_device(self.actions[index]),
-            rewards=to_device(self.rewards[index]),
-            next_features=to_device(self.next_features[index]),
-            terminals=to_device(self.terminals[index]),
-            discounts=to_device(self.discounts[index]),
+            features=rows[:, :f],
+            actions=rows[:, 2 * f + 3].long(),
+            rewards=rows[:, 2 * f],
+            next_features=rows[:, f : 2 * f],
+            terminals=rows[:, 2 * f + 1],
+            discounts=rows[:, 2 * f + 2],
         )
 
     # -- checkpoints ---------------------------------------------------------------------------
@@ -162,6 +174,7 @@ class ReplayBuffer:
         }
         for name in _FIELDS:
             state[name] = torch.from_numpy(getattr(self, name)[rows].copy())
+        state["actions"] = state["actions"].long()
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:

@@ -42,9 +42,7 @@ import numpy as np
 import torch
 
 from socnav_wm.agents.agent_file import (
-    Agent,
     TrainResult,
-    greedy_episodes,
     load_world_model,
     variant_for,
 )
@@ -57,18 +55,21 @@ from socnav_wm.agents.checkpoint import (
 )
 from socnav_wm.agents.features import Variant
 from socnav_wm.agents.learner import DQNLearner
+from socnav_wm.agents.memory import GREEDY_BATCH, training_needs
 from socnav_wm.agents.params import AgentParams, check_variant
 from socnav_wm.agents.replay import NStepAccumulator, ReplayBuffer
 from socnav_wm.devices import resolve_device
 from socnav_wm.env.core import Simulator, StepResult
 from socnav_wm.env.episode import Episode
+from socnav_wm.env.observation import observation_size
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_HUMAN, COLLISION_WALL, BatchState
 from socnav_wm.env.wrappers import goal_distance, progress_shaping
 from socnav_wm.io import atomic_path
 from socnav_wm.metrics import episodes_to_solve
 from socnav_wm.progress import progress
-from socnav_wm.resources import check_fits
+from socnav_wm.resources import check_fits_together
+from socnav_wm.worldmodel.fitting import NonFiniteTrainingError
 
 EpisodeCallback = Callable[[list[dict[str, Any]]], None]
 """Receives the rows of the episodes that finished in the last vector step."""
@@ -125,9 +126,74 @@ def success_rate(episodes: Sequence[Episode]) -> float:
     return float(np.mean([e.success for e in episodes]))
 
 
+def greedy_success_rate(
+    q_network: torch.nn.Module,
+    variant: Variant,
+    env_params: EnvParams,
+    *,
+    seed: int,
+    episodes: int,
+    batch_size: int = GREEDY_BATCH,
+) -> float:
+    """Success rate of the greedy policy on scenarios ``0..episodes-1`` of ``seed``: what
+    :func:`greedy_episodes` gives (the same scenarios, ``batch_size`` started together, the same
+    simulator, the same ``argmax`` of the Q-values; ``variant`` holds the episodes' state),
+    without recording trajectories and without computing the features and actions of the
+    episodes that have ended: the batch shrinks as they end (on average about a third of a
+    greedy run's rows are still running). The one difference is floating-point: a matrix
+    product over fewer rows may round differently in the last bit."""
+    success = np.zeros(episodes, dtype=bool)
+    for start in range(0, episodes, batch_size):
+        ids = np.arange(start, min(start + batch_size, episodes))
+        sim = Simulator(ids.size, env_params)
+        obs, _ = sim.reset(seed=seed, scenario_ids=ids)
+        running = np.arange(ids.size)  # the slots whose episode goes on
+        actions = np.zeros(ids.size, dtype=np.int64)  # a finished slot's action is ignored
+        with torch.inference_mode():
+            features = variant.reset(obs)
+            while running.size:
+                chosen = q_network(features).argmax(dim=1).cpu().numpy()
+                actions[running] = chosen
+                result = sim.step(actions)
+                ended = (result.terminated | result.truncated)[running]
+                success[ids[running[ended]]] = result.info["success"][running[ended]]
+                going_on = np.flatnonzero(~ended)
+                running = running[going_on]
+                variant.keep(going_on)
+                if running.size:
+                    features, _ = variant.step(result.obs[running], chosen[going_on])
+    return float(success.mean())
+
+
 def _next_multiple(done: int, every: int) -> int:
     """The first multiple of ``every`` above ``done`` (when the next periodic event is due)."""
     return (done // every + 1) * every
+
+
+def check_finite_updates(
+    learner: DQNLearner, losses: Sequence[torch.Tensor], updates: int, params: AgentParams
+) -> None:
+    """Stop training at the first NaN or infinite loss, or non-finite weight, of the updates
+    just made (``losses``, the last of which was update number ``updates``): one check for a
+    vector step's updates, no ``.item()`` per update.
+
+    Raises:
+        NonFiniteTrainingError: one line naming the update and the learning rate.
+    """
+    hint = f"(agent.learning_rate {params.learning_rate:g} too high?); no agent was written"
+    stacked = torch.stack(list(losses))
+    finite = torch.isfinite(stacked)
+    if not bool(finite.all()):
+        first = int((~finite).nonzero()[0, 0])
+        number = updates - len(losses) + first + 1
+        raise NonFiniteTrainingError(
+            f"agent training stopped: loss became {float(stacked[first])} at update {number} {hint}"
+        )
+    if not learner.weights_finite():
+        raise NonFiniteTrainingError(
+            f"agent training stopped: weight {learner.first_nonfinite_weight()} became "
+            f"non-finite by update {updates} {hint}"
+        )
 
 
 # -- one vector step --------------------------------------------------------------------------
@@ -306,13 +372,17 @@ def train_agent(
             run ends with exactly the weights of an uninterrupted one.
         on_episodes: called after each vector step in which episodes finished, with their rows.
         quiet: no progress bar.
+
+    Raises:
+        NonFiniteTrainingError: a loss or a weight became NaN or infinite (one line; the
+            caller writes no agent).
     """
     check_variant(variant)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
     p = params.resolved(variant)
     device = resolve_device(p.device)
-    vae, lstm = load_world_model(variant, vae_path, lstm_path, device)
+    vae, lstm = load_world_model(variant, vae_path, lstm_path, device, env_params)
     identity = run_identity(variant, p, env_params, seed, vae_path, lstm_path)
     checkpoint_path = Path(checkpoint_path) if checkpoint_path is not None else None
 
@@ -323,10 +393,11 @@ def train_agent(
     explore_seed, replay_seed = np.random.SeedSequence(seed).spawn(2)
 
     # -- the pieces --------------------------------------------------------------------------
+    obs_dim = observation_size(env_params.num_humans)
+    features_of = variant_for(variant, vae, lstm, p, obs_dim=obs_dim, device=device)
+    # Every allocation of the run together, before the first: each may fit alone, not all.
+    check_fits_together(training_needs(features_of, p, env_params))
     sim = Simulator(p.num_envs, env_params)
-    features_of = variant_for(variant, vae, lstm, p, obs_dim=sim.obs_dim, device=device)
-    needed = ReplayBuffer.bytes_needed(p.buffer_size, features_of.feature_dim)
-    check_fits("agent.buffer_size", needed, f"a replay buffer of {p.buffer_size:,} transitions")
     learner = DQNLearner(features_of.feature_dim, p, device)
     obs, _ = sim.reset(seed=training_env_seed(seed))
     state = TrainState(
@@ -359,11 +430,12 @@ def train_agent(
 
     def select() -> None:
         """Run the current network greedily on the selection scenarios; keep it if best."""
-        greedy = Agent(learner.q_network, features_of, p, env_params)  # acts on its own copies
-        runs = greedy_episodes(
-            greedy, env_params, seed=selection_seed(seed), scenario_ids=range(p.select_episodes)
-        )
-        state.selection.append({"episode": len(state.rows), "success_rate": success_rate(runs)})
+        fresh = variant_for(variant, vae, lstm, p, obs_dim=features_of.obs_dim, device=device)
+        rate = greedy_success_rate(
+            learner.q_network, fresh, env_params, seed=selection_seed(seed),
+            episodes=p.select_episodes,
+        )  # fmt: skip
+        state.selection.append({"episode": len(state.rows), "success_rate": rate})
         if best_selection_run(state.selection) is state.selection[-1]:
             state.best_weights = learner.weights()
 
@@ -398,9 +470,12 @@ def train_agent(
 
             # -- learn -----------------------------------------------------------------------
             if len(state.replay) >= p.learning_starts:
-                for _ in range(p.updates_per_step):
+                losses = [
                     learner.update(state.replay.sample(p.batch_size))
-                    state.updates += 1
+                    for _ in range(p.updates_per_step)
+                ]
+                state.updates += len(losses)
+                check_finite_updates(learner, losses, state.updates, p)
 
             # -- finished episodes: log rows, decay ε, select, checkpoint --------------------
             if done.any():

@@ -31,7 +31,7 @@ from typing import Any, NoReturn
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 os.environ.setdefault("GOMP_SPINCOUNT", "1000")
 
-COMMAND_MODULES = ("stages", "render", "studies", "bench")
+COMMAND_MODULES = ("stages", "models", "render", "studies", "bench")
 """The modules of ``socnav_wm.cli`` whose commands the application has, in ``--help`` order."""
 
 PIPELINE_MODULES = frozenset(

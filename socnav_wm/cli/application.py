@@ -4,6 +4,7 @@ one line and exit status 2, SIGTERM as Ctrl-C, and the tables commands print."""
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -35,6 +36,41 @@ def _expected_errors() -> tuple[type[BaseException], ...]:
     return (UserError, ValueError, FileNotFoundError, TrackingError)
 
 
+def one_line_error(exc: BaseException) -> str | None:
+    """The line an expected exception ends the command with: a problem with the input (its
+    own message), or with the machine (:func:`environment_problem`); None for anything else,
+    a bug, which keeps its traceback."""
+    if isinstance(exc, OSError) and exc.errno is not None:  # the OS's words, not "[Errno 2] …"
+        return environment_problem(exc)
+    if isinstance(exc, _expected_errors()):
+        text = str(exc).strip()
+        return text.splitlines()[0] if text else repr(exc)
+    return environment_problem(exc)
+
+
+def environment_problem(exc: BaseException) -> str | None:
+    """One line for a fault of the machine rather than of the code: an allocation that failed
+    (``MemoryError``, PyTorch's allocator), a full disk, a file or folder that cannot be used;
+    None for anything else (a bug, shown with its traceback)."""
+    import errno
+
+    from socnav_wm.resources import format_bytes, is_out_of_memory
+
+    if is_out_of_memory(exc):
+        tried = re.search(r"tried to allocate (\d+) bytes", str(exc))
+        size = f" (PyTorch could not allocate {format_bytes(int(tried.group(1)))})" if tried else ""
+        return f"out of memory{size}; lower the sizes in params.yaml"
+    if not isinstance(exc, OSError):
+        return None
+    where = exc.filename if exc.filename is not None else None
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT) or "No space left on device" in str(exc):
+        return "no space left on device" + (f" writing {where}" if where else "")
+    if exc.errno is None or exc.strerror is None:
+        return " ".join(str(exc).split()) or type(exc).__name__
+    what = exc.strerror[0].lower() + exc.strerror[1:]
+    return f"{where}: {what}" if where is not None else what
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM (what ``kill``, make, CI and schedulers send), raised where the command runs.
 
@@ -61,11 +97,10 @@ def friendly_errors(command: Callable[..., Any]) -> Callable[..., Any]:
         except Terminated:
             typer.echo("error: terminated (SIGTERM); nothing was written", err=True)
             raise typer.Exit(code=128 + signal.SIGTERM) from None
-        except MemoryError:
-            typer.echo("error: out of memory; lower the sizes in params.yaml", err=True)
-            raise typer.Exit(code=2) from None
-        except _expected_errors() as exc:
-            message = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
+        except Exception as exc:
+            message = one_line_error(exc)
+            if message is None:
+                raise
             typer.echo(f"error: {message}", err=True)
             raise typer.Exit(code=2) from None
         finally:

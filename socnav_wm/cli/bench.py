@@ -138,7 +138,7 @@ def bench_plan_command(
     *,
     method: Annotated[
         list[str] | None,
-        typer.Option(help="Planners (repeatable) [default: every planner whose models exist]."),
+        typer.Option(help="Planners (repeatable) \\[default: every planner whose models exist]."),
     ] = None,
     batch: Annotated[
         list[int] | None, typer.Option(help="Episodes planned together (repeatable).", min=1)

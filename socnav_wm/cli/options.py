@@ -17,11 +17,10 @@ import typer
 
 from socnav_wm.cli.application import UserError
 from socnav_wm.layout import LAYOUT
+from socnav_wm.section import DEVICES
 
 if TYPE_CHECKING:
     from socnav_wm.config import Params
-
-DEVICES = ("auto", "cpu", "cuda")
 
 _OPTIONS: dict[str, tuple[Any, Any]] = {
     "params_path": (
@@ -98,6 +97,20 @@ def documents_option(block: str) -> Any:
     ]
 
 
+def path_option(help: str) -> Any:
+    """The type of an option naming one file or folder, with ``help``."""
+    return Annotated[Path, typer.Option(help=help)]
+
+
+Rollouts = path_option("Directory of rollout shards.")
+ModelOut = path_option("Model file to write.")
+ValidationMetrics = path_option("Validation metrics (JSON).")
+History = path_option("Per-epoch losses (JSON, for plots).")
+FrozenVae = path_option("Frozen VAE.")
+FrozenLstm = path_option("Frozen LSTM.")
+"""Options that several commands share, each with its help."""
+
+
 def available_cores() -> int:
     """The CPU cores this process may run on (its affinity mask where the OS has one)."""
 
@@ -139,10 +152,17 @@ class SharedOptions:
     """The params section whose ``device`` ``--device`` replaces."""
     sets_threads: bool = False
     """Whether :meth:`load` sets PyTorch's threads (the command has ``--threads``)."""
+    has_quiet: bool = False
+    """Whether the command has ``--quiet`` (its stage draws a progress bar)."""
 
     @property
     def tracking(self) -> bool:
         return not self.no_tracking
+
+    def stage_options(self) -> dict[str, bool]:
+        """The keyword arguments that a stage's ``run`` takes from these options: ``tracking``,
+        and ``quiet`` where the command has ``--quiet``."""
+        return {"tracking": self.tracking, **({"quiet": self.quiet} if self.has_quiet else {})}
 
     def load(self) -> Params:
         """The validated params (before any heavy import), with ``--device`` applied, then
@@ -165,12 +185,14 @@ class SharedOptions:
         return params
 
     def load_or_defaults(self) -> Params:
-        """:meth:`load`, or the default params where the params file is not there."""
+        """:meth:`load`, or where the params file is not there the defaults, with the overlays
+        and ``--set`` applied all the same."""
         if self.params_path.exists():
             return self.load()
-        from socnav_wm.config import Params
+        from socnav_wm.config import load_params
 
-        return Params()
+        # An empty file (the null device) is "all defaults".
+        return load_params(os.devnull, list(self.overrides), list(self.overlays))
 
     def _with_device(self, params: Params) -> Params:
         if self.device is None:
@@ -222,6 +244,7 @@ def shared_options(
                 },
                 device_section=device,
                 sets_threads="threads" in last,
+                has_quiet="quiet" in last,
             )
             return function(options=options, **kwargs)
 

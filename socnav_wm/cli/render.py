@@ -13,7 +13,7 @@ from socnav_wm.layout import LAYOUT, agent_file
 
 
 @command()
-@shared_options("params")
+@shared_options("params", "set", "overlay")
 def render(
     *,
     out: Annotated[Path, typer.Option(help="Animated GIF to write.")] = LAYOUT.episode_gif,
@@ -35,7 +35,8 @@ def render(
     human_policy: Annotated[
         str | None,
         typer.Option(
-            help="Human motion: mixed, sfm or orca [default: env.human_policy of the params file]."
+            help="Human motion: mixed, sfm or orca "
+            "\\[default: env.human_policy of the params file]."
         ),
     ] = None,
     agents_dir: Annotated[
@@ -54,10 +55,20 @@ def render(
     if policy not in named and as_file.suffix != ".pt":
         choices = ", ".join(named)
         raise UserError(f"--policy: unknown {policy!r}; expected {choices} or an agent file (.pt)")
+    from socnav_wm.section import check_seed
+
+    check_seed(seed, "--seed")
     import numpy as np
 
+    from socnav_wm.env.core import MAX_SCENARIO_ID
     from socnav_wm.env.render import episode_frames, write_gif
     from socnav_wm.env.rollout import random_policy, run_episodes
+
+    for scenario_id in scenario or ():
+        if scenario_id >= MAX_SCENARIO_ID:
+            raise UserError(
+                f"--scenario: scenario ids are below 2**62 (the simulator's), got {scenario_id}"
+            )
 
     config = options.load_or_defaults()
     params = config.env if human_policy is None else config.env.replace(human_policy=human_policy)
@@ -77,7 +88,8 @@ def render(
     else:
         from socnav_wm.agents.agent_file import greedy_episodes, load_agent
 
-        runs = greedy_episodes(load_agent(as_file), params, seed=seed, scenario_ids=ids)
+        agent = load_agent(as_file, env_params=params)
+        runs = greedy_episodes(agent, params, seed=seed, scenario_ids=ids)
     frames = []
     for episode in runs:
         frames += episode_frames(episode, params, label=policy if len(policy) < 24 else "agent",

@@ -12,14 +12,21 @@ from typing import Annotated, Any
 import typer
 
 from socnav_wm.cli.application import command, print_table
-from socnav_wm.cli.options import SharedOptions, documents_option, shared_options
+from socnav_wm.cli.options import (
+    FrozenLstm,
+    FrozenVae,
+    History,
+    ModelOut,
+    Rollouts,
+    SharedOptions,
+    ValidationMetrics,
+    documents_option,
+    path_option,
+    shared_options,
+)
 from socnav_wm.layout import LAYOUT
 
-AgentsDir = Annotated[Path, typer.Option(help="Agents folder: reads {variant}/seed-{seed}.pt.")]
-Rollouts = Annotated[Path, typer.Option(help="Directory of rollout shards.")]
-ModelOut = Annotated[Path, typer.Option(help="Model file to write.")]
-ValidationMetrics = Annotated[Path, typer.Option(help="Validation metrics (JSON).")]
-History = Annotated[Path, typer.Option(help="Per-epoch losses (JSON, for plots).")]
+AgentsDir = path_option("Agents folder: reads {variant}/seed-{seed}.pt.")
 ResultsDocuments = documents_option("results")
 
 
@@ -28,18 +35,22 @@ def run_stage(module: str, options: SharedOptions, **arguments: Any) -> None:
     MLflow run unless ``--no-tracking``), and print its one-line summary."""
     params = options.load()
     stage = importlib.import_module(f"socnav_wm.stages.{module}")
-    typer.echo(stage.run(params, tracking=options.tracking, **arguments))
+    typer.echo(stage.run(params, **options.stage_options(), **arguments))
+
+
+Shards = path_option("Directory of Parquet shards.")
+CollectMetrics = path_option("Summary metrics (JSON).")
 
 
 @command()
 @shared_options("params", "set", "overlay", "no-tracking", "quiet")
 def collect(
     options: SharedOptions,
-    out: Annotated[Path, typer.Option(help="Directory of Parquet shards.")] = LAYOUT.rollouts,
-    metrics: Annotated[Path, typer.Option(help="Summary metrics (JSON).")] = LAYOUT.collect_metrics,
+    out: Shards = LAYOUT.rollouts,
+    metrics: CollectMetrics = LAYOUT.collect_metrics,
 ) -> None:
     """Random-policy rollouts of the simulator into Parquet shards (stage `collect`)."""
-    run_stage("collect", options, out=out, metrics=metrics, quiet=options.quiet)
+    run_stage("collect", options, out=out, metrics=metrics)
 
 
 @command("train-vae")
@@ -52,10 +63,7 @@ def train_vae_command(
     history: History = LAYOUT.vae_history,
 ) -> None:
     """Train the VAE (23-d observation → latent) on the rollouts (stage `train-vae`)."""
-    run_stage(
-        "train_vae", options,
-        rollouts=rollouts, out=out, metrics=metrics, history=history, quiet=options.quiet,
-    )  # fmt: skip
+    run_stage("train_vae", options, rollouts=rollouts, out=out, metrics=metrics, history=history)
 
 
 @command("train-lstm")
@@ -70,9 +78,14 @@ def train_lstm_command(
 ) -> None:
     """Train the LSTM world model on VAE latents of the rollouts (stage `train-lstm`)."""
     run_stage(
-        "train_lstm", options,
-        rollouts=rollouts, vae=vae, out=out, metrics=metrics, history=history, quiet=options.quiet,
-    )  # fmt: skip
+        "train_lstm", options, rollouts=rollouts, vae=vae, out=out, metrics=metrics, history=history
+    )
+
+
+AgentsOut = path_option("Agents folder: writes {variant}/seed-{seed}.pt.")
+TrainingLogs = path_option("Training logs: writes {variant}/seed-{seed}.parquet.")
+AgentMetrics = path_option("Summary metrics: writes {variant}/seed-{seed}.json.")
+Checkpoints = path_option("Resumable checkpoints (one file per distinct run).")
 
 
 @command("train-agent")
@@ -82,20 +95,12 @@ def train_agent_command(
     variant: Annotated[str, typer.Option(help="Agent variant (see `agent` in params.yaml).")],
     seed: Annotated[int, typer.Option(min=0, help="Training seed.")] = 0,
     options: SharedOptions,
-    vae: Annotated[Path, typer.Option(help="Frozen VAE.")] = LAYOUT.vae,
-    lstm: Annotated[Path, typer.Option(help="Frozen LSTM.")] = LAYOUT.lstm,
-    out_dir: Annotated[
-        Path, typer.Option(help="Agents folder: writes {variant}/seed-{seed}.pt.")
-    ] = LAYOUT.agents_dir,
-    log_dir: Annotated[
-        Path, typer.Option(help="Training logs: writes {variant}/seed-{seed}.parquet.")
-    ] = LAYOUT.training_logs,
-    metrics_dir: Annotated[
-        Path, typer.Option(help="Summary metrics: writes {variant}/seed-{seed}.json.")
-    ] = LAYOUT.agent_metrics_dir,
-    checkpoint_dir: Annotated[
-        Path, typer.Option(help="Resumable checkpoints (one file per distinct run).")
-    ] = LAYOUT.checkpoints,
+    vae: FrozenVae = LAYOUT.vae,
+    lstm: FrozenLstm = LAYOUT.lstm,
+    out_dir: AgentsOut = LAYOUT.agents_dir,
+    log_dir: TrainingLogs = LAYOUT.training_logs,
+    metrics_dir: AgentMetrics = LAYOUT.agent_metrics_dir,
+    checkpoint_dir: Checkpoints = LAYOUT.checkpoints,
     resume: Annotated[
         bool, typer.Option(help="Continue from this run's last checkpoint, if there is one.")
     ] = False,
@@ -106,8 +111,10 @@ def train_agent_command(
     """Train one Dueling DQN variant with one seed on the frozen world model (stage
     `train-agent`)."""
     from socnav_wm.agents.params import check_variant
+    from socnav_wm.section import check_seed
 
     check_variant(variant)
+    check_seed(seed, "--seed")
     run_stage(
         "train_agent",
         options,
@@ -121,8 +128,16 @@ def train_agent_command(
         checkpoint_dir=checkpoint_dir,
         resume=resume,
         keep_checkpoint=keep_checkpoint,
-        quiet=options.quiet,
     )
+
+
+def _default(path: Path) -> str:
+    """``[default: path]`` in a help text (escaped: --help's markup would take it for a tag)."""
+    return f"\\[default: {path.as_posix()}]"
+
+
+EvaluationOut = path_option("Writes {method}.parquet and {method}-trajectories.parquet.")
+EvaluationMetrics = path_option("Writes {method}.json.")
 
 
 @command()
@@ -132,21 +147,17 @@ def evaluate(
     method: Annotated[str, typer.Option(help="An agent variant, a baseline or a planner.")],
     options: SharedOptions,
     agents_dir: AgentsDir = LAYOUT.agents_dir,
-    out_dir: Annotated[
-        Path, typer.Option(help="Writes {method}.parquet and {method}-trajectories.parquet.")
-    ] = LAYOUT.eval_dir,
-    metrics_dir: Annotated[
-        Path, typer.Option(help="Writes {method}.json.")
-    ] = LAYOUT.eval_metrics_dir,
+    out_dir: EvaluationOut = LAYOUT.eval_dir,
+    metrics_dir: EvaluationMetrics = LAYOUT.eval_metrics_dir,
     planning_model: Annotated[
         Path | None,
-        typer.Option(help=f"wm-mpc's planning model [default: {LAYOUT.planning_model(0)}]."),
+        typer.Option(help=f"wm-mpc's planning model {_default(LAYOUT.planning_model(0))}."),
     ] = None,
     vae: Annotated[
-        Path | None, typer.Option(help=f"vae-lstm-mpc's VAE [default: {LAYOUT.vae}].")
+        Path | None, typer.Option(help=f"vae-lstm-mpc's VAE {_default(LAYOUT.vae)}.")
     ] = None,
     lstm: Annotated[
-        Path | None, typer.Option(help=f"vae-lstm-mpc's LSTM [default: {LAYOUT.lstm}].")
+        Path | None, typer.Option(help=f"vae-lstm-mpc's LSTM {_default(LAYOUT.lstm)}.")
     ] = None,
 ) -> None:
     """Run one method greedily on the test scenarios: every training seed of an agent
@@ -168,7 +179,6 @@ def evaluate(
             for role, path in (("planning_model", planning_model), ("vae", vae), ("lstm", lstm))
             if path is not None
         },
-        quiet=options.quiet,
     )
 
 
@@ -236,11 +246,16 @@ def predict(
         planning_models=planning_model,
         out=out,
         figure=figure,
-        tracking=options.tracking,
+        **options.stage_options(),
     )
     for title, rows, formats in stage.tables(result, PREDICTION_KS):
         print_table(rows, title, formats)
     typer.echo(f"wrote {out} and {figure}")
+
+
+CollectedRollouts = path_option("The rollouts (collect's output).")
+PlanningOut = path_option("Where seed-N.pt is written.")
+PlanningMetrics = path_option("Where seed-N.json is written.")
 
 
 @command("train-planning-model")
@@ -250,15 +265,9 @@ def train_planning_model(
     seed: Annotated[
         int, typer.Option(min=0, help="Training seed (one of planning_model.seeds).")
     ] = 0,
-    rollouts: Annotated[
-        Path, typer.Option(help="The rollouts (collect's output).")
-    ] = LAYOUT.rollouts,
-    out_dir: Annotated[
-        Path, typer.Option(help="Where seed-N.pt is written.")
-    ] = LAYOUT.planning_dir,
-    metrics_dir: Annotated[
-        Path, typer.Option(help="Where seed-N.json is written.")
-    ] = LAYOUT.planning_metrics_dir,
+    rollouts: CollectedRollouts = LAYOUT.rollouts,
+    out_dir: PlanningOut = LAYOUT.planning_dir,
+    metrics_dir: PlanningMetrics = LAYOUT.planning_metrics_dir,
 ) -> None:
     """Train the planning world model (socnav_wm/worldmodel/residual.py: constant velocity plus a
     learned correction of each human's velocity) on the rollouts (stage `train_planning_model`,
@@ -266,7 +275,6 @@ def train_planning_model(
     run_stage(
         "train_planning_model", options,
         seed=seed, rollouts=rollouts, out_dir=out_dir, metrics_dir=metrics_dir,
-        quiet=options.quiet,
     )  # fmt: skip
 
 

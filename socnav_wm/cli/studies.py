@@ -9,7 +9,14 @@ from typing import Annotated
 import typer
 
 from socnav_wm.cli.application import UserError, command
-from socnav_wm.cli.options import SharedOptions, documents_option, shared_options
+from socnav_wm.cli.options import (
+    FrozenLstm,
+    FrozenVae,
+    SharedOptions,
+    documents_option,
+    path_option,
+    shared_options,
+)
 from socnav_wm.layout import LAYOUT
 
 ClaimsDocuments = documents_option("claims")
@@ -47,8 +54,8 @@ def sweep(
     cpus: Annotated[
         int | None, typer.Option(min=1, help="Local Ray's CPUs: runs at once (default: cores).")
     ] = None,
-    vae: Annotated[Path, typer.Option(help="Frozen VAE.")] = LAYOUT.vae,
-    lstm: Annotated[Path, typer.Option(help="Frozen LSTM.")] = LAYOUT.lstm,
+    vae: FrozenVae = LAYOUT.vae,
+    lstm: FrozenLstm = LAYOUT.lstm,
     runs_dir: Annotated[
         Path | None,
         typer.Option(
@@ -96,27 +103,31 @@ def sweep(
         )
 
 
+ReportClaims = path_option("The report's claims (stage `report`).")
+StudyReports = path_option("The studies' reports (each study's claims.json).")
+
+
 @command("study-claims")
 @shared_options("no-tracking")
 def study_claims(
     options: SharedOptions,
-    report_claims: Annotated[
-        Path, typer.Option(help="The report's claims (stage `report`).")
-    ] = LAYOUT.report_claims,
-    studies_dir: Annotated[
-        Path, typer.Option(help="The studies' reports (each study's claims.json).")
-    ] = LAYOUT.study_reports,
+    report_claims: ReportClaims = LAYOUT.report_claims,
+    studies_dir: StudyReports = LAYOUT.study_reports,
     document: ClaimsDocuments = None,
 ) -> None:
     """The paper's claims, each decided by the strongest evidence present: the seeds study's
     five seeds for the training claims, the horizon study for the look-ahead claim, the report
-    for the rest (stage `study_claims` of studies/dvc.yaml)."""
+    for the rest (stage `study_claims` of studies/dvc.yaml). Claims of other studies
+    (--studies-dir not the pipeline's) go into no document unless --document names one."""
     from socnav_wm.stages import study_claims as stage
 
+    documents = tuple(document) if document is not None else LAYOUT.studies_documents
+    if document is None and studies_dir.resolve() != LAYOUT.study_reports.resolve():
+        documents = ()  # docs/studies.md's claims are the pipeline's studies', not another's
     message = stage.run(
         report_claims=report_claims,
         studies_dir=studies_dir,
-        documents=tuple(document) if document is not None else LAYOUT.studies_documents,
-        tracking=options.tracking,
+        documents=documents,
+        **options.stage_options(),
     )
     typer.echo(message)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from socnav_wm.data.compatibility import made_with
 from socnav_wm.data.shards import ShardWriter
 from socnav_wm.env.core import NUM_ACTIONS, Simulator
 from socnav_wm.env.params import EnvParams
@@ -147,7 +148,9 @@ def collect_rollouts(
     outcomes = np.zeros(4, np.int64)  # success, human, wall, timeout
     lengths = 0
     finished = 0
-    with ShardWriter(out_dir, env_params.num_humans, max_rows_per_shard) as writer:
+    with ShardWriter(
+        out_dir, env_params.num_humans, max_rows_per_shard, env=made_with(env_params)
+    ) as writer:
         while not sim.state.done.all():
             s = sim.state
             running = np.flatnonzero(~s.done)

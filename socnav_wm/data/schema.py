@@ -1,8 +1,10 @@
 """The rollout table: one row per environment step, defined once as a pyarrow schema.
 
 Every shard written by :class:`socnav_wm.data.shards.ShardWriter` carries this schema, and every
-reader checks it. The schema version and the number of humans travel in the Parquet schema
-metadata, so a shard can be checked on its own, without side files.
+reader checks it. The schema version, the number of humans and the scenarios the rollouts were
+collected in (the ``env`` section, as JSON; shards written before it was recorded have none)
+travel in the Parquet schema metadata, so a shard can be checked on its own, without side
+files.
 
 Columns (one row per step; lengths in metres, angles in radians, world frame unless noted):
 
@@ -28,6 +30,10 @@ Columns (one row per step; lengths in metres, angles in radians, world frame unl
 
 from __future__ import annotations
 
+import json
+from collections.abc import Mapping
+from typing import Any
+
 import pyarrow as pa
 
 SCHEMA_VERSION = 1
@@ -36,6 +42,7 @@ SCHEMA_VERSION = 1
 METADATA_SCHEMA_VERSION = b"socnav_wm.schema_version"
 METADATA_NUM_HUMANS = b"socnav_wm.num_humans"
 METADATA_OBS_DIM = b"socnav_wm.obs_dim"
+METADATA_ENV = b"socnav_wm.env"
 
 # Discrete actions, in the paper's order (ARCHITECTURE.md "Names").
 ACTION_STOP = 0
@@ -81,11 +88,12 @@ def observation_dim(num_humans: int) -> int:
     return GOAL_FEATURES + FEATURES_PER_HUMAN * num_humans
 
 
-def rollout_schema(num_humans: int) -> pa.Schema:
+def rollout_schema(num_humans: int, env: Mapping[str, Any] | None = None) -> pa.Schema:
     """The Arrow schema of a rollout shard for ``num_humans`` people.
 
     The observation width is :func:`observation_dim` (23 for the paper's 3 humans). The schema
-    metadata holds ``SCHEMA_VERSION``, ``num_humans`` and the observation width.
+    metadata holds ``SCHEMA_VERSION``, ``num_humans``, the observation width and, when given,
+    ``env``: the scenarios' parameters (:func:`socnav_wm.data.compatibility.made_with`).
     """
     if num_humans < 1:
         raise ValueError(f"num_humans must be >= 1, got {num_humans}")
@@ -117,6 +125,8 @@ def rollout_schema(num_humans: int) -> pa.Schema:
         METADATA_NUM_HUMANS: str(num_humans).encode(),
         METADATA_OBS_DIM: str(obs_dim).encode(),
     }
+    if env is not None:
+        metadata[METADATA_ENV] = json.dumps(dict(env), sort_keys=True).encode()
     return pa.schema(fields, metadata=metadata)
 
 
@@ -136,3 +146,13 @@ def schema_num_humans(schema: pa.Schema) -> int | None:
         return int(raw) if raw is not None else None
     except ValueError:
         return None
+
+
+def schema_env(schema: pa.Schema) -> dict[str, Any] | None:
+    """The scenarios' parameters stored in ``schema``'s metadata, or None when absent/garbled."""
+    raw = (schema.metadata or {}).get(METADATA_ENV)
+    try:
+        env = json.loads(raw) if raw is not None else None
+    except ValueError:
+        return None
+    return env if isinstance(env, dict) else None

@@ -11,18 +11,25 @@ import contextlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from socnav_wm.data.compatibility import check_made_with
 from socnav_wm.data.schema import (
+    COLLISION_NONE,
+    COLLISION_WALL,
     COLUMN_NAMES,
+    NUM_ACTIONS,
     SCHEMA_VERSION,
     rollout_schema,
+    schema_env,
     schema_num_humans,
     schema_version,
 )
+from socnav_wm.env.params import EnvParams
 from socnav_wm.io import atomic_path
 
 SHARD_GLOB = "shard-*.parquet"
@@ -49,6 +56,12 @@ FINITE_COLUMNS: tuple[str, ...] = ("obs", "next_obs", "reward")
 
 Other float columns may legitimately hold ``inf`` (``dmin`` with no humans in the scene).
 """
+
+VALUE_RANGES: dict[str, tuple[int, int]] = {
+    "action": (0, NUM_ACTIONS - 1),
+    "collision": (COLLISION_NONE, COLLISION_WALL),
+}
+"""Integer columns that hold codes: the smallest and largest valid value of each."""
 
 
 def shard_name(index: int) -> str:
@@ -87,6 +100,9 @@ class ShardWriter:
     renamed onto ``shard-NNNNN.parquet`` when complete, so a crash never leaves a truncated shard
     under a shard name. Shards of an earlier run in ``out_dir`` are deleted when the writer opens.
 
+    ``env``: the scenarios' parameters (:func:`socnav_wm.data.compatibility.made_with`), kept
+    in every shard's metadata for the readers to check.
+
     Usage::
 
         with ShardWriter(out_dir, num_humans=3, max_rows_per_shard=500_000) as writer:
@@ -102,11 +118,14 @@ class ShardWriter:
         *,
         compression: str = "zstd",
         row_group_rows: int = DEFAULT_ROW_GROUP_ROWS,
+        env: Mapping[str, Any] | None = None,
     ) -> None:
         if max_rows_per_shard < 1:
             raise ValueError(f"max_rows_per_shard must be >= 1, got {max_rows_per_shard}")
+        if env is not None and env.get("num_humans") != num_humans:
+            raise ValueError(f"env has {env.get('num_humans')} humans, the shards {num_humans}")
         self.out_dir = Path(out_dir)
-        self.schema = rollout_schema(num_humans)
+        self.schema = rollout_schema(num_humans, env)
         self.num_humans = num_humans
         self.max_rows_per_shard = max_rows_per_shard
         self.compression = compression
@@ -291,9 +310,13 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _read_shard(
-    path: Path, columns: Sequence[str] | None, num_humans: int | None
+    path: Path,
+    columns: Sequence[str] | None,
+    num_humans: int | None,
+    env_params: EnvParams | None = None,
 ) -> tuple[pa.Table, int]:
-    """Read and check one shard; return (table, num_humans). Raises RolloutError naming it."""
+    """Read and check one shard (its format, its scenarios against ``env_params``, the values
+    read); return (table, num_humans). Raises RolloutError naming it."""
     try:
         parquet = pq.ParquetFile(path)
         schema = parquet.schema_arrow
@@ -309,6 +332,8 @@ def _read_shard(
     file_humans = schema_num_humans(schema)
     if file_humans is None:
         raise RolloutError(f"{path}: no num_humans in the Parquet metadata")
+    made = schema_env(schema) or {"num_humans": file_humans}
+    check_made_with(path, made, env_params, verb="collected", error=RolloutError)
     if num_humans is not None and file_humans != num_humans:
         raise RolloutError(
             f"{path}: {file_humans} humans, but earlier shards of this dataset have {num_humans}"
@@ -336,6 +361,8 @@ def _read_shard(
     except (pa.ArrowException, ValueError) as exc:
         raise RolloutError(f"{path}: cannot match the rollout schema ({_first_line(exc)})") from exc
     _check_finite(path, table)
+    _check_codes(path, table)
+    validate_episodes(table, path)
     return table, file_humans
 
 
@@ -358,18 +385,52 @@ def _check_finite(path: Path, table: pa.Table) -> None:
         raise RolloutError(f"{path}: row {row}, column {label}: not finite ({value})")
 
 
-def read_rollouts(path_or_dir: str | Path, columns: Sequence[str] | None = None) -> pa.Table:
+def _check_codes(path: Path, table: pa.Table) -> None:
+    """Refuse a value outside its :data:`VALUE_RANGES` (an action 7 or −3) in one shard.
+
+    Raises:
+        RolloutError: naming the shard, the first offending row (within the shard), the column
+            and the value.
+    """
+    for name, (low, high) in VALUE_RANGES.items():
+        if name not in table.column_names:
+            continue
+        values = column_to_numpy(table, name)
+        bad = (values < low) | (values > high)
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            value = int(values[row])
+            raise RolloutError(
+                f"{path}: row {row}, column {name}: {value}, not one of {low}..{high}"
+            )
+
+
+def read_rollouts(
+    path_or_dir: str | Path,
+    columns: Sequence[str] | None = None,
+    env_params: EnvParams | None = None,
+) -> pa.Table:
     """Read a shard file, or every ``shard-*.parquet`` of a directory in order, into one table.
+
+    Each shard is checked on what is read, cheaply (vectorised): finite observations and
+    rewards, actions and collision codes in range, and its episodes whole and in order as far
+    as the columns read tell (:func:`validate_episodes`); no episode may continue in another
+    shard.
 
     Args:
         path_or_dir: a dataset directory or a single shard file.
         columns: column names to read (all by default).
+        env_params: the scenarios the rollouts must have been collected in (the number of
+            humans and the room size, :func:`socnav_wm.data.compatibility.check_made_with`);
+            None: not checked.
 
     Raises:
         RolloutError: one line naming the file, when the path is missing, the directory holds
             no shards, a file is not readable Parquet (truncated or corrupt), its schema version
             is not ``SCHEMA_VERSION``, columns are missing, shards disagree on ``num_humans``,
-            or a value of a :data:`FINITE_COLUMNS` column is NaN or infinite.
+            a shard was collected in other scenarios than ``env_params``, a value of a
+            :data:`FINITE_COLUMNS` column is NaN or infinite, a code is out of range, or an
+            episode is broken.
     """
     path = Path(path_or_dir)
     if not path.exists():
@@ -382,8 +443,20 @@ def read_rollouts(path_or_dir: str | Path, columns: Sequence[str] | None = None)
         files = [path]
     tables: list[pa.Table] = []
     num_humans: int | None = None
-    for file in files:
-        table, num_humans = _read_shard(file, columns, num_humans)
+    seen = np.zeros(0, dtype=np.int64)  # the episode ids of the shards before, when read
+    owner = np.zeros(0, dtype=np.int64)  # the index in ``files`` of the shard of each
+    for index, file in enumerate(files):
+        table, num_humans = _read_shard(file, columns, num_humans, env_params)
+        if "episode_id" in table.column_names:
+            ids = np.unique(column_to_numpy(table, "episode_id"))
+            shared, _, where = np.intersect1d(ids, seen, return_indices=True)
+            if shared.size:
+                raise RolloutError(
+                    f"{file}: episode {int(shared[0])} is also in {files[owner[where[0]]]} "
+                    "(an episode's rows must be contiguous, in one shard)"
+                )
+            seen = np.concatenate([seen, ids])
+            owner = np.concatenate([owner, np.full(ids.size, index)])
         tables.append(table)
     return pa.concat_tables(tables) if len(tables) > 1 else tables[0]
 
@@ -401,16 +474,21 @@ def column_to_numpy(table: pa.Table, name: str) -> np.ndarray:
     return column.to_numpy()
 
 
-def validate_episodes(table: pa.Table) -> None:
-    """Check episode boundaries and continuity of a rollout table (vectorised).
+def validate_episodes(table: pa.Table, path: str | Path | None = None) -> None:
+    """Check episode boundaries and continuity of a rollout table (vectorised), as far as its
+    columns tell (:func:`read_rollouts` checks every shard on the columns it reads).
 
-    Checks, for every episode: its rows are contiguous; ``t`` runs 0..n−1; exactly one
-    ``is_first`` (on t == 0) and one ``is_last`` (on the final row); ``next_obs`` of step t equals
-    ``obs`` of step t+1 exactly (the collector stores the same float32 values twice).
+    Checks, for every episode: its rows are contiguous (``episode_id``); ``t`` runs 0..n−1;
+    exactly one ``is_first`` (on t == 0) and one ``is_last`` (on the final row); ``next_obs`` of
+    step t equals ``obs`` of step t+1 exactly (the collector stores the same float32 values
+    twice). Without ``episode_id`` nothing is checked.
 
     Raises:
-        RolloutError: naming the first offending episode.
+        RolloutError: naming ``path`` (when given) and the first offending episode.
     """
+    names = set(table.column_names)
+    if "episode_id" not in names:
+        return
     episode_id = column_to_numpy(table, "episode_id")
     rows = len(episode_id)
     if rows == 0:
@@ -418,11 +496,12 @@ def validate_episodes(table: pa.Table) -> None:
     starts = _episode_starts(episode_id)
     lengths = np.diff(np.append(starts, rows))
     run_of_row = np.repeat(np.arange(len(starts)), lengths)
+    where = f"{path}: " if path is not None else ""
 
     def fail(row_mask: np.ndarray, problem: str) -> None:
         if row_mask.any():
             row = int(np.flatnonzero(row_mask)[0])
-            raise RolloutError(f"episode {int(episode_id[row])}: {problem}")
+            raise RolloutError(f"{where}episode {int(episode_id[row])}: {problem}")
 
     ids, first_run = np.unique(episode_id[starts], return_index=True)
     if len(ids) != len(starts):
@@ -431,18 +510,22 @@ def validate_episodes(table: pa.Table) -> None:
         fail(np.repeat(repeated, lengths), "rows are not contiguous (the id appears twice)")
 
     step_in_episode = np.arange(rows) - starts[run_of_row]
-    t = column_to_numpy(table, "t").astype(np.int64)
-    fail(t != step_in_episode, "t does not run 0..n-1")
-    is_first = column_to_numpy(table, "is_first").astype(bool)
-    fail(is_first != (step_in_episode == 0), "is_first is not set exactly on t == 0")
+    if "t" in names:
+        t = column_to_numpy(table, "t").astype(np.int64)
+        fail(t != step_in_episode, "t does not run 0..n-1")
+    if "is_first" in names:
+        is_first = column_to_numpy(table, "is_first").astype(bool)
+        fail(is_first != (step_in_episode == 0), "is_first is not set exactly on t == 0")
     is_final_row = np.zeros(rows, dtype=bool)
     is_final_row[starts + lengths - 1] = True
-    is_last = column_to_numpy(table, "is_last").astype(bool)
-    fail(is_last != is_final_row, "is_last is not set exactly on the final row")
+    if "is_last" in names:
+        is_last = column_to_numpy(table, "is_last").astype(bool)
+        fail(is_last != is_final_row, "is_last is not set exactly on the final row")
 
-    obs = column_to_numpy(table, "obs")
-    next_obs = column_to_numpy(table, "next_obs")
-    broken = np.zeros(rows, dtype=bool)
-    # Row i must hand over to row i+1 unless row i ends its episode.
-    broken[:-1] = np.any(next_obs[:-1] != obs[1:], axis=1) & ~is_final_row[:-1]
-    fail(broken, "next_obs of a step differs from obs of the following step")
+    if {"obs", "next_obs"} <= names:
+        obs = column_to_numpy(table, "obs")
+        next_obs = column_to_numpy(table, "next_obs")
+        broken = np.zeros(rows, dtype=bool)
+        # Row i must hand over to row i+1 unless row i ends its episode.
+        broken[:-1] = np.any(next_obs[:-1] != obs[1:], axis=1) & ~is_final_row[:-1]
+        fail(broken, "next_obs of a step differs from obs of the following step")

@@ -139,8 +139,8 @@ class Simulator:
         self.obs_dim = observation_size(self.params.num_humans)
         # The state, the observations and a step's temporaries: refuse in one line what the
         # machine cannot hold rather than allocate until MemoryError.
-        one_env = sum(a.nbytes for a in vars(BatchState.zeros(1, self.params.num_humans)).values())
-        check_fits("num_envs", 4 * one_env * self.num_envs, f"{self.num_envs:,} environments")
+        needed = self.bytes_needed(self.num_envs, self.params)
+        check_fits("num_envs", needed, f"{self.num_envs:,} environments")
         self.state = BatchState.zeros(self.num_envs, self.params.num_humans)
         self.state.done[:] = True
         self.seed = 0
@@ -256,6 +256,14 @@ class Simulator:
         s.discomfort_sum[envs] = 0.0
         s.done[envs] = False
         self._observe(envs)
+
+    @staticmethod
+    def bytes_needed(num_envs: int, params: EnvParams) -> int:
+        """What ``num_envs`` environments of ``params`` allocate: the state, the observations
+        and a step's temporaries (about four copies of the state; measured: 1.0 KiB an
+        environment of three humans, against 1.2 estimated)."""
+        one_env = sum(a.nbytes for a in vars(BatchState.zeros(1, params.num_humans)).values())
+        return 4 * one_env * int(num_envs)
 
     # ------------------------------------------------------------------ step
     def _observe(self, envs: np.ndarray) -> None:

@@ -79,10 +79,7 @@ class SocNavEnv(gym.Env[np.ndarray, Any]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         _check_seed(seed)
         super().reset(seed=seed)
-        options = dict(options or {})
-        scenario = options.pop("scenario_id", None)
-        if options:
-            raise ValueError(f"reset options: unknown key(s) {', '.join(sorted(options))}")
+        scenario = _reset_option(options, "scenario_id")
         if seed is not None:
             obs, info = self.sim.reset(seed=seed, scenario_ids=_one_id(scenario, 0))
         elif not self.sim.state.done.all() or self.sim.next_scenario > 0 or scenario is not None:
@@ -123,6 +120,15 @@ def _check_seed(seed: Any) -> None:
         isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0
     ):
         raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
+
+
+def _reset_option(options: dict[str, Any] | None, key: str) -> Any:
+    """The one option that ``reset`` takes, ``key`` (None when absent); any other is an error."""
+    rest = dict(options or {})
+    value = rest.pop(key, None)
+    if rest:
+        raise ValueError(f"reset options: unknown key(s) {', '.join(sorted(rest))}")
+    return value
 
 
 def _one_id(scenario: Any, default: int) -> np.ndarray:
@@ -212,10 +218,7 @@ class SocNavVectorEnv(VectorEnv):
             raise ValueError("seed: the batched env takes one seed for the whole batch")
         _check_seed(seed)
         super().reset(seed=seed)
-        options = dict(options or {})
-        ids = options.pop("scenario_ids", None)
-        if options:
-            raise ValueError(f"reset options: unknown key(s) {', '.join(sorted(options))}")
+        ids = _reset_option(options, "scenario_ids")
         if seed is None and self.sim.next_scenario == 0:
             seed = int(self.np_random.integers(2**31))
         obs, info = self.sim.reset(seed=seed, scenario_ids=ids)

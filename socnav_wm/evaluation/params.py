@@ -12,7 +12,7 @@ from typing import Annotated, ClassVar
 from pydantic import Field, field_validator
 
 from socnav_wm.method_names import check_method
-from socnav_wm.section import Device, Section
+from socnav_wm.section import Device, Section, Seed, seed_field
 
 __all__ = ["EvalParams", "ReportParams"]
 
@@ -24,7 +24,7 @@ class EvalParams(Section):
 
     episodes: int = Field(500, gt=0)
     """Test scenarios per method and training seed (the paper: 500)."""
-    scenario_seed: int = Field(1_000_003, ge=0)
+    scenario_seed: Seed = seed_field(1_000_003)
     """Seed of the test scenarios; training scenarios use other seeds (never these)."""
     batch_size: int = Field(500, gt=0)
     """Scenarios simulated together (speed only: results do not depend on it)."""

@@ -13,14 +13,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from socnav_wm.evaluation import paper
-from socnav_wm.evaluation.claims import ClaimResult
+from socnav_wm.evaluation.claims import VERDICTS, ClaimResult
 from socnav_wm.evaluation.comparisons import PairedComparison
 from socnav_wm.evaluation.formatting import (
     direction_mark,
@@ -32,10 +32,16 @@ from socnav_wm.evaluation.formatting import (
 from socnav_wm.evaluation.model_sections import planning_section, prediction_section
 from socnav_wm.evaluation.records import BASELINE_SEED
 from socnav_wm.evaluation.results import MethodEvaluation
-from socnav_wm.method_names import METHOD_NAMES
-from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
+from socnav_wm.method_names import METHOD_NAMES, VARIANT_NAMES
+from socnav_wm.metrics import ALL_METRICS, METRIC_DIRECTIONS, METRIC_UNITS, PAPER_METRICS
 
-__all__ = ["render_summary", "replace_marked_block", "report_content", "results_table"]
+__all__ = [
+    "ReportResults",
+    "render_summary",
+    "replace_marked_block",
+    "report_content",
+    "results_table",
+]
 
 
 def _fmt_difference(c: PairedComparison) -> str:
@@ -48,56 +54,62 @@ def _fmt_difference(c: PairedComparison) -> str:
     return f"{signed(c.difference)} [{fmt_value(c.metric, c.low)}, {fmt_value(c.metric, c.high)}]"
 
 
+@dataclass(frozen=True)
+class ReportResults:
+    """What the report found: what both ``metrics/report.json`` (:func:`report_content`) and
+    ``summary.md`` (:func:`render_summary`) present."""
+
+    evaluations: Mapping[str, MethodEvaluation]
+    absent: Sequence[str]
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]]
+    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]]
+    any_collision: Mapping[str, Mapping[str, float]]
+    comparisons: Sequence[PairedComparison]
+    reference: str
+    pareto: Mapping[str, Any]
+    claims: Sequence[ClaimResult]
+    training: Mapping[str, Mapping[str, Any]]
+    scenario_seed: int | None
+    num_scenarios: int
+    smoothing_window: int
+    alpha: float
+
+
 # --------------------------------------------------------------------------------------------
 # metrics/report.json
 # --------------------------------------------------------------------------------------------
 
 
-def report_content(
-    *,
-    evaluations: Mapping[str, MethodEvaluation],
-    absent: Sequence[str],
-    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
-    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]],
-    any_collision: Mapping[str, Mapping[str, float]],
-    comparisons: Sequence[PairedComparison],
-    reference: str,
-    pareto: Mapping[str, Any],
-    claims: Sequence[ClaimResult],
-    training: Mapping[str, Mapping[str, Any]],
-    scenario_seed: int | None,
-    num_scenarios: int,
-    smoothing_window: int,
-    alpha: float,
-) -> dict[str, Any]:
+def report_content(results: ReportResults) -> dict[str, Any]:
     """The content of ``metrics/report.json``: means, intervals, p-values, Pareto set, verdicts."""
-    present = list(evaluations)
+    present = list(results.evaluations)
     content: dict[str, Any] = {
-        "scenario_seed": scenario_seed,
-        "episodes": num_scenarios,
-        "reference": reference,
-        "alpha": alpha,
+        "scenario_seed": results.scenario_seed,
+        "episodes": results.num_scenarios,
+        "reference": results.reference,
+        "alpha": results.alpha,
         "methods_present": present,
-        "methods_absent": absent,
+        "methods_absent": results.absent,
         "methods": {
             m: {
-                "training_seeds": evaluations[m].training_seeds,
-                "metrics": summaries[m],
-                "any_collision": any_collision[m],
+                "training_seeds": results.evaluations[m].training_seeds,
+                "metrics": results.summaries[m],
+                "any_collision": results.any_collision[m],
                 **(
-                    {"per_seed": {f"seed-{s}": v for s, v in per_seed[m].items()}}
-                    if m in per_seed
+                    {"per_seed": {f"seed-{s}": v for s, v in results.per_seed[m].items()}}
+                    if m in results.per_seed
                     else {}
                 ),
             }
             for m in present
         },
         "comparisons": {},
-        "pareto": pareto,
+        "pareto": results.pareto,
         # Verdicts only: the checks behind them (lists of dicts, which `dvc metrics show`
         # cannot tabulate) go to reports/claims.json.
         "claims": {
-            r.claim.claim_id: {"verdict": r.verdict, "statement": r.claim.statement} for r in claims
+            r.claim.claim_id: {"verdict": r.verdict, "statement": r.claim.statement}
+            for r in results.claims
         },
         "training": {
             v: {
@@ -108,13 +120,13 @@ def report_content(
                 if v in paper.TRAINING_TARGETS
                 else None,
             }
-            for v, t in training.items()
+            for v, t in results.training.items()
         },
-        "smoothing_window": smoothing_window,
+        "smoothing_window": results.smoothing_window,
     }
-    for c in comparisons:
+    for c in results.comparisons:
         entry = {k: v for k, v in asdict(c).items() if k not in ("method", "other", "metric")}
-        entry["verdict"] = c.verdict(alpha)
+        entry["verdict"] = c.verdict(results.alpha)
         content["comparisons"].setdefault(c.method, {})[c.metric] = entry
     return content
 
@@ -125,24 +137,11 @@ def report_content(
 
 
 def render_summary(
+    results: ReportResults,
     *,
-    evaluations: Mapping[str, MethodEvaluation],
-    absent: Sequence[str],
-    summaries: Mapping[str, Mapping[str, Mapping[str, float]]],
-    per_seed: Mapping[str, Mapping[int, Mapping[str, float]]],
-    any_collision: Mapping[str, Mapping[str, float]],
-    comparisons: Sequence[PairedComparison],
-    reference: str,
-    pareto: Mapping[str, Any],
-    claims: Sequence[ClaimResult],
-    training: Mapping[str, Mapping[str, Any]],
     figure_paths: Sequence[Path],
     figure_notes: Sequence[str],
     out_dir: Path,
-    scenario_seed: int | None,
-    num_scenarios: int,
-    smoothing_window: int,
-    alpha: float,
     prediction: Mapping[str, Any] | None = None,
     planning_horizons: Mapping[str, int] | None = None,
 ) -> str:
@@ -150,6 +149,10 @@ def render_summary(
     model's prediction errors (``prediction``, from ``socnav-wm predict``), the planners against
     their ceiling (explained by the prediction errors at each planner's horizon,
     ``planning_horizons``), figures."""
+    evaluations, summaries, pareto = results.evaluations, results.summaries, results.pareto
+    comparisons, reference, alpha = results.comparisons, results.reference, results.alpha
+    num_scenarios, scenario_seed = results.num_scenarios, results.scenario_seed
+    absent, smoothing_window = results.absent, results.smoothing_window
     lines: list[str] = ["# socnav-wm: evaluation report", ""]
     present = list(evaluations)
     seeds_text = ", ".join(
@@ -198,7 +201,7 @@ def render_summary(
             "distance ≥ 2.02 m).",
             "",
         ]
-        if per_seed:
+        if results.per_seed:
             lines += [
                 "### Per training seed",
                 "",
@@ -209,7 +212,7 @@ def render_summary(
             header = ["method", "seed"] + list(PAPER_METRICS)
             rows = [
                 [m, str(s)] + [fmt_value(k, v[k]) for k in PAPER_METRICS]
-                for m, seeds in per_seed.items()
+                for m, seeds in results.per_seed.items()
                 for s, v in seeds.items()
             ]
             lines += markdown_table(header, rows) + [""]
@@ -287,7 +290,9 @@ def render_summary(
         lines += ["No method evaluated.", ""]
 
     # -- the paper -----------------------------------------------------------------------------
-    lines += _paper_section(evaluations, summaries, any_collision, training, smoothing_window)
+    lines += _paper_section(
+        evaluations, summaries, results.any_collision, results.training, smoothing_window
+    )
     lines += ["## The paper's claims, checked", ""]
     lines += [
         'Each claim is split into checks ("A beats B on a metric"), Holm-adjusted within the '
@@ -301,7 +306,7 @@ def render_summary(
         "every claim with the strongest evidence present (stage `study_claims`).",
         "",
     ]
-    for result in claims:
+    for result in results.claims:
         note = f" ({result.note})" if result.note else ""
         lines.append(
             f"- **{result.verdict.upper()}**{note} — {result.claim.statement} "
@@ -431,9 +436,13 @@ def results_table(
     *,
     num_scenarios: int,
     scenario_seed: int | None,
+    claims: Sequence[ClaimResult] = (),
 ) -> str:
     """The results of every evaluated method as one markdown table, with the line that says
-    what it is (the block :func:`replace_marked_block` writes into the README)."""
+    what it is, units in its header, and under it the verdicts: the paper's claims
+    (:func:`claims_verdict`) and where a robot or a planner beats every learned agent
+    (:func:`beats_every_agent`). The block :func:`replace_marked_block` writes into the
+    README."""
     lines = [
         f"Every method on the same {num_scenarios} test scenarios (scenario seed "
         f"{scenario_seed}); agents: every training seed, greedy. Mean [95% interval]; "
@@ -441,9 +450,61 @@ def results_table(
         "(all metrics and the paired tests: `reports/summary.md`).",
         "",
     ]
-    header = ["method"] + [f"{m} {direction_mark(m)}" for m in RESULTS_METRICS]
+    header = ["method"] + [f"{m} ({_unit(m)}) {direction_mark(m)}" for m in RESULTS_METRICS]
     rows = [[f"`{m}`"] + [fmt_ci(k, summaries[m][k]) for k in RESULTS_METRICS] for m in present]
-    return "\n".join(lines + markdown_table(header, rows))
+    verdicts = [v for v in (claims_verdict(claims), beats_every_agent(summaries, present)) if v]
+    return "\n".join(lines + markdown_table(header, rows) + ([""] + verdicts if verdicts else []))
+
+
+def _unit(metric: str) -> str:
+    """A column's unit as the table prints its values: rates in %."""
+    unit = METRIC_UNITS[metric]
+    return "%" if unit == "0/1" else unit
+
+
+def claims_verdict(claims: Sequence[ClaimResult]) -> str:
+    """One line: how many of the paper's claims this run reproduces, and which verdict each
+    has (empty without claims)."""
+    if not claims:
+        return ""
+    by_verdict = {v: [c.claim.claim_id for c in claims if c.verdict == v] for v in VERDICTS}
+    found = ", ".join(f"{v}: {', '.join(ids)}" for v, ids in by_verdict.items() if ids)
+    reproduced = len(by_verdict["reproduced"])
+    return (
+        f"**The paper's claims: {reproduced} of {len(claims)} reproduced** ({found}; "
+        "`reports/claims.json`, why in `reports/summary.md`)."
+    )
+
+
+def beats_every_agent(
+    summaries: Mapping[str, Mapping[str, Mapping[str, float]]], present: Sequence[str]
+) -> str:
+    """One line: for each evaluated robot and planner, the table's metrics on which it beats
+    every evaluated learned agent, its 95% interval clear of each agent's (empty without
+    both kinds)."""
+    agents = [m for m in present if m in VARIANT_NAMES]
+    others = [m for m in present if m not in VARIANT_NAMES]
+    if not agents or not others:
+        return ""
+
+    def better(method: str, metric: str) -> bool:
+        own = summaries[method][metric]
+        for agent in agents:
+            theirs = summaries[agent][metric]
+            if METRIC_DIRECTIONS[metric] == "max" and not own["low"] > theirs["high"]:
+                return False
+            if METRIC_DIRECTIONS[metric] == "min" and not own["high"] < theirs["low"]:
+                return False
+        return True
+
+    found = []
+    for method in others:
+        wins = [metric for metric in RESULTS_METRICS if better(method, metric)]
+        found.append(f"`{method}` on {', '.join(wins) if wins else 'none'}")
+    return (
+        "**Robots and planners against the learned agents** (better than every agent, the "
+        f"95% intervals apart): {'; '.join(found)}."
+    )
 
 
 def replace_marked_block(text: str, name: str, body: str) -> str:

@@ -49,6 +49,7 @@ from socnav_wm.evaluation.intervals import mean_ci_crossed
 from socnav_wm.evaluation.params import ReportParams
 from socnav_wm.evaluation.records import episode_from_trajectories, per_seed_means, summarise
 from socnav_wm.evaluation.rendering import (
+    ReportResults,
     render_summary,
     replace_marked_block,
     report_content,
@@ -273,7 +274,7 @@ def build_report(
             (figures_dir / name).unlink(missing_ok=True)
 
     # -- outputs -------------------------------------------------------------------------------
-    content = report_content(
+    results = ReportResults(
         evaluations=evaluations,
         absent=absent,
         summaries=summaries,
@@ -289,24 +290,12 @@ def build_report(
         smoothing_window=smoothing_window,
         alpha=alpha,
     )
+    content = report_content(results)
     summary_md = render_summary(
-        evaluations=evaluations,
-        absent=absent,
-        summaries=summaries,
-        per_seed=per_seed,
-        any_collision=any_collision,
-        comparisons=comparisons,
-        reference=reference,
-        pareto=pareto,
-        claims=claims,
-        training=training,
+        results,
         figure_paths=figure_paths,
         figure_notes=figure_notes,
         out_dir=out_dir,
-        scenario_seed=scenario_seed,
-        num_scenarios=num_scenarios,
-        smoothing_window=smoothing_window,
-        alpha=alpha,
         prediction=_read_prediction(prediction_path),
         planning_horizons=planning_horizons,
     )
@@ -318,7 +307,7 @@ def build_report(
     write_json_atomic(claims_path, {r.claim.claim_id: r.to_dict() for r in claims})
     write_json_atomic(metrics_path, content)
     table = results_table(
-        summaries, present, num_scenarios=num_scenarios, scenario_seed=scenario_seed
+        summaries, present, num_scenarios=num_scenarios, scenario_seed=scenario_seed, claims=claims
     )
     for document in map(Path, documents):  # the README's results block, and the docs'
         text = replace_marked_block(document.read_text(encoding="utf-8"), "results", table)

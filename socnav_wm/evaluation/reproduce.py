@@ -4,14 +4,16 @@ A run on the same CPU model, library build and thread count reproduces every fil
 on another machine the floating-point sums round differently, trainings diverge and only the
 statistics reproduce. :func:`compare_runs` checks that: each method's mean of each metric in
 the rerun must lie within the committed run's 95% interval, and the committed mean within the
-rerun's (``socnav-wm check``).
+rerun's (``socnav-wm check``). Every committed method must have been rerun.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+from socnav_wm.io import read_json
 
 CHECKED_METRICS = ("success", "human_collision", "discomfort", "simulation_time")
 
@@ -34,28 +36,56 @@ class MetricCheck:
         return all(self.committed[k] == self.rerun[k] for k in ("mean", "low", "high"))
 
 
+def _read_metrics(path: Path, metrics: tuple[str, ...]) -> dict[str, Any]:
+    """An evaluation's ``{method}.json``, checked to hold what is compared; otherwise a
+    ValueError naming the file."""
+    content = read_json(path, "evaluation metrics file")
+    if not isinstance(content, dict) or not isinstance(content.get("metrics"), dict):
+        raise ValueError(f"{path}: not a socnav-wm evaluation metrics file (no 'metrics')")
+    for metric in metrics:
+        entry = content["metrics"].get(metric)
+        if entry is None:
+            raise ValueError(f"{path}: no {metric!r} metric")
+        if not isinstance(entry, dict) or not all(
+            isinstance(entry.get(k), int | float) for k in ("mean", "low", "high")
+        ):
+            raise ValueError(f"{path}: metric {metric!r} lacks its mean, low and high")
+    return content
+
+
 def compare_runs(
     committed_dir: str | Path, rerun_dir: str | Path, metrics: tuple[str, ...] = CHECKED_METRICS
 ) -> list[MetricCheck]:
-    """One check per method present in both folders of ``{method}.json`` evaluation metrics
-    (``metrics/eval/``) and per metric. Raises ValueError when the folders share no method or
-    were evaluated on different test scenarios."""
+    """One check per method of the committed folder of ``{method}.json`` evaluation metrics
+    (``metrics/eval/``) and per metric.
+
+    Raises:
+        ValueError: one line: the committed folder holds no evaluation metrics, the rerun lacks
+            a method of the committed run (naming them), a file is not valid JSON or lacks a
+            metric (naming it), or the folders were evaluated on different test scenarios.
+    """
     committed_dir, rerun_dir = Path(committed_dir), Path(rerun_dir)
+    committed = sorted(committed_dir.glob("*.json"))
+    if not committed:
+        raise ValueError(f"{committed_dir}: no evaluation metrics to compare with (no *.json)")
+    if not rerun_dir.is_dir():
+        raise ValueError(f"{rerun_dir}: no such folder of evaluation metrics")
+    missing = [path.stem for path in committed if not (rerun_dir / path.name).is_file()]
+    if missing:
+        raise ValueError(
+            f"{rerun_dir}: no evaluation metrics of {', '.join(missing)} (evaluated in "
+            f"{committed_dir}); a rerun must evaluate every committed method"
+        )
     checks = []
-    for path in sorted(committed_dir.glob("*.json")):
+    for path in committed:
         other = rerun_dir / path.name
-        if not other.is_file():
-            continue
-        a, b = json.loads(path.read_text()), json.loads(other.read_text())
+        a, b = _read_metrics(path, metrics), _read_metrics(other, metrics)
         for key in ("scenario_seed", "episodes"):
             if a.get(key) != b.get(key):
                 raise ValueError(
                     f"{other}: {key} {b.get(key)!r}, the committed run has {a.get(key)!r}"
                 )
         for metric in metrics:
-            checks.append(
-                MetricCheck(a["method"], metric, a["metrics"][metric], b["metrics"][metric])
-            )
-    if not checks:
-        raise ValueError(f"{rerun_dir}: no evaluation metrics of the methods in {committed_dir}")
+            name = a.get("method", path.stem)
+            checks.append(MetricCheck(name, metric, a["metrics"][metric], b["metrics"][metric]))
     return checks

@@ -32,7 +32,7 @@ from socnav_wm.method_names import (
 )
 from socnav_wm.planning.params import PlanningParams
 
-__all__ = ["METHODS", "Kind", "Method", "Policy", "PolicyFactory", "method", "names"]
+__all__ = ["MAKES", "METHODS", "Kind", "Method", "Policy", "PolicyFactory", "method", "names"]
 
 Kind = Literal["agent", "robot", "planner"]
 
@@ -41,13 +41,13 @@ PolicyFactory = Callable[[], tuple[Policy, bool]]
 """A fresh policy for one batch of episodes that start together, and whether it reads the
 simulator (its argument is then the simulator, else the observations)."""
 
-_MAKES = {
-    "agent": "socnav-wm train-agent --variant {name} --seed 0",
-    "planning_model": "socnav-wm train-planning-model --seed 0",
+MAKES = {
+    "agent": "socnav-wm train-agent --variant {variant} --seed {seed}",
+    "planning_model": "socnav-wm train-planning-model --seed {seed}",
     "vae": "socnav-wm train-vae",
     "lstm": "socnav-wm train-lstm",
 }
-"""The command that makes the file of each role."""
+"""The command that makes the file of each role (``{variant}``, ``{seed}``: which one)."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ class Method:
             files[role] = Path(path)
         for role, path in files.items():
             if not path.is_file():
-                make = _MAKES[role].format(name=self.name)
+                make = MAKES[role].format(variant=self.name, seed=0)
                 raise FileNotFoundError(f"{path}: no such {role} file (make it: {make})")
         return files
 

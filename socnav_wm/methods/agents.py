@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-from socnav_wm.agents.agent_file import env_params_obs_dim, load_agent
+from socnav_wm.agents.agent_file import load_agent
 from socnav_wm.env.params import EnvParams
 from socnav_wm.methods import Method, PolicyFactory
 
@@ -14,14 +14,10 @@ def build(
     method: Method, env_params: EnvParams, *, files: Mapping[str, Path], device: str
 ) -> PolicyFactory:
     """Agent ``files["agent"]`` (of variant ``method.name``), on ``device``; refused in one line
-    when the file holds another variant or was trained with another number of humans."""
+    when the file holds another variant or was trained for other scenarios (another number of
+    humans or room size)."""
     path = files["agent"]
-    agent = load_agent(path, device)
+    agent = load_agent(path, device, env_params)
     if agent.variant_name != method.name:
         raise ValueError(f"{path}: an agent of variant {agent.variant_name!r}, not {method.name!r}")
-    if env_params_obs_dim(agent.env_params) != env_params_obs_dim(env_params):
-        raise ValueError(
-            f"{path}: trained with {agent.env_params.num_humans} humans, the test scenarios "
-            f"have {env_params.num_humans}"
-        )
     return lambda: (agent.policy(), False)

@@ -10,14 +10,14 @@ from socnav_wm.methods import Method, PolicyFactory
 from socnav_wm.methods.planners import planner_policies
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.planning.vae_lstm import VaeLstmModel
-from socnav_wm.worldmodel.files import load_lstm, load_vae
+from socnav_wm.worldmodel.files import load_vae_lstm
 
 
 def build(
     method: Method, env_params: EnvParams, *, files: Mapping[str, Path], planning: PlanningParams
 ) -> PolicyFactory:
-    """The VAE ``files["vae"]`` and LSTM ``files["lstm"]``, loaded for every batch."""
-    vae, lstm = files["vae"], files["lstm"]
-    return planner_policies(
-        method, env_params, planning, lambda: VaeLstmModel(load_vae(vae), load_lstm(lstm))
-    )
+    """The VAE ``files["vae"]`` and LSTM ``files["lstm"]`` (refused in one line when they were
+    trained for other scenarios than ``env_params``, or do not fit together), a fresh copy
+    for every batch."""
+    vae, lstm = load_vae_lstm(files["vae"], files["lstm"], env_params=env_params)
+    return planner_policies(method, env_params, planning, lambda: VaeLstmModel(vae, lstm))

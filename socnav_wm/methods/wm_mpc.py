@@ -10,14 +10,15 @@ from socnav_wm.methods import Method, PolicyFactory
 from socnav_wm.methods.planners import planner_policies
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.planning.residual import ResidualPlanningModel
-from socnav_wm.worldmodel.residual import load_residual
+from socnav_wm.worldmodel.planning_file import load_residual
 
 
 def build(
     method: Method, env_params: EnvParams, *, files: Mapping[str, Path], planning: PlanningParams
 ) -> PolicyFactory:
-    """The planning model ``files["planning_model"]``, loaded for every batch."""
-    path = files["planning_model"]
+    """The planning model ``files["planning_model"]`` (refused in one line when it was trained
+    for other scenarios than ``env_params``), a fresh copy for every batch."""
+    model = load_residual(files["planning_model"], env_params)
     return planner_policies(
-        method, env_params, planning, lambda: ResidualPlanningModel(load_residual(path), env_params)
+        method, env_params, planning, lambda: ResidualPlanningModel(model, env_params)
     )

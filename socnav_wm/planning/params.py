@@ -9,7 +9,7 @@ from typing import Annotated, Any, ClassVar, Literal, Self
 
 from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
-from socnav_wm.section import Section, as_tuple, finite
+from socnav_wm.section import Section, Seed, as_tuple, finite, seed_field
 
 PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc")
 """The planning methods: receding-horizon control over the paper's four actions, each with its
@@ -68,7 +68,7 @@ class PlanningParams(Section):
     """The planner knows the room and the robot's pose in it (a map and localisation, which
     the ORCA and SFM robots and ``oracle-mpc`` have too): a candidate whose imagined robot
     touches a wall collides there. False: it sees only what the observation shows (no walls)."""
-    oracle_seed: int = Field(4_000_037, ge=0)
+    oracle_seed: Seed = seed_field(4_000_037)
     """``oracle-mpc``: the seed of its clones' random draws (SFM noticing the robot, the humans'
     new goals), not the episode's: it knows the humans' rules, not their future coin flips."""
     oracle_clairvoyant: bool = False

@@ -22,12 +22,12 @@ def run(
     quiet: bool = True,
 ) -> str:
     c = params.collect
-    check_writable(out, metrics)
+    check_writable(out, metrics, folders=(out,))
     # Every episode at its longest, every value of a row uncompressed: an upper bound.
     row_bytes = 8 * (2 * observation_size(params.env.num_humans) + 8 + 2 * params.env.num_humans)
     most = c.episodes * params.env.max_steps * row_bytes
     check_disk("collect.episodes", most, out.parent, f"{c.episodes:,} episodes")
-    with open_stage("collect", "collect", params, tracking=tracking) as run:
+    with open_stage("collect", "collect", params, tracking=tracking, outputs=(out, metrics)) as run:
         # The whole directory appears at once, with its metrics: a killed run never leaves a
         # partial dataset.
         with (

@@ -17,6 +17,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from socnav_wm.io import first_line
 from socnav_wm.method_names import BASELINE_NAMES, VARIANT_NAMES
 from socnav_wm.methods import METHODS
 
@@ -161,14 +162,36 @@ def _stage_definitions(dvc_yaml: dict) -> dict[str, dict]:
     return stages
 
 
-def dvc_yaml_differences(path: str | Path = "dvc.yaml") -> list[str]:
-    """One line per stage whose ``socnav_wm/`` deps in ``dvc.yaml`` are not exactly its import
-    closure (empty when they all agree)."""
+def _read_dvc_yaml(path: str | Path) -> dict:
+    """The content of pipeline file ``path``; a ValueError naming it when it is missing, not
+    valid YAML (with the line of the first fault) or not a mapping."""
     import yaml
 
-    definitions = _stage_definitions(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    try:
+        content = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark is not None else ""
+        problem = getattr(exc, "problem", None) or first_line(exc)
+        raise ValueError(f"{path}: not valid YAML ({where}{problem})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not readable ({first_line(exc)})") from None
+    if not isinstance(content, dict) or not isinstance(content.get("stages") or {}, dict):
+        raise ValueError(f"{path}: not a dvc.yaml (no mapping of stages)")
+    return content
+
+
+def dvc_yaml_differences(path: str | Path = "dvc.yaml") -> list[str]:
+    """One line per stage whose ``socnav_wm/`` deps in ``dvc.yaml`` are not exactly its import
+    closure (empty when they all agree); a ValueError naming the file when it is no readable
+    pipeline file."""
+    closures = stage_dependencies(path)
+    definitions = _stage_definitions(_read_dvc_yaml(path))
     problems = []
-    for stage, expected in stage_dependencies(path).items():
+    for stage, expected in closures.items():
         if stage not in definitions:
             problems.append(f"{path}: no stage {stage!r}")
             continue
@@ -194,6 +217,7 @@ def write_dvc_yaml(path: str | Path = "dvc.yaml") -> bool:
 
     path = Path(path)
     expected = stage_dependencies(path)
+    _read_dvc_yaml(path)  # a broken file is refused, not rewritten
     lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
     out: list[str] = []
     stage: str | None = None

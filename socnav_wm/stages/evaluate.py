@@ -11,7 +11,12 @@ from socnav_wm.evaluation.evaluate import evaluate_method, evaluation_metrics, w
 from socnav_wm.io import check_writable, outputs_together
 from socnav_wm.layout import agent_file
 from socnav_wm.methods import method as lookup
+from socnav_wm.metrics import METRIC_UNITS
 from socnav_wm.stages.common import open_stage
+
+HEADLINE_METRICS = ("success", "human_collision", "discomfort", "simulation_time")
+"""What a user compares first in MLflow (each run's description; the means, their interval
+bounds are the ``*_ci_low`` / ``*_ci_high`` metrics)."""
 
 
 def run(
@@ -34,7 +39,12 @@ def run(
         roles = ", ".join(f"--{role.replace('_', '-')}" for role in planner_files)
         raise ValueError(f"{roles}: only for a planner, not {method!r}")
     check_writable(episodes_path, trajectories_path, metrics_path)
-    with open_stage(stage, f"evaluate/{method}", params, tracking=tracking) as run:
+    reads = [agent_file(agents_dir, method, s) for s in params.experiment.seeds] * (kind == "agent")
+    files = {
+        "inputs": [*reads, *(planner_files or {}).values()],
+        "outputs": (episodes_path, trajectories_path, metrics_path),
+    }
+    with open_stage(stage, f"evaluate/{method}", params, tracking=tracking, **files) as run:
         agent_paths = None
         if kind == "agent":
             agent_paths = {s: agent_file(agents_dir, method, s) for s in params.experiment.seeds}
@@ -69,7 +79,11 @@ def run(
             run.link_runs(
                 "training_runs", [f"train-agent/{method}/seed-{s}" for s in sorted(agent_paths)]
             )
-        run.log_metrics({m: v["mean"] for m, v in content["metrics"].items()})
+        means = {m: v["mean"] for m, v in content["metrics"].items()}
+        headline = {m: means[m] for m in HEADLINE_METRICS if m in means}
+        units = {m: METRIC_UNITS[m] for m in headline if METRIC_UNITS.get(m) != "0/1"}
+        run.log_headline(headline, units=units)  # rates (0/1) go without a unit
+        run.log_metrics({m: v for m, v in means.items() if m not in headline})
         run.log_metrics({f"{m}_ci_low": v["low"] for m, v in content["metrics"].items()})
         run.log_metrics({f"{m}_ci_high": v["high"] for m, v in content["metrics"].items()})
         run.log_metrics({"wall_time_s": result.wall_time})

@@ -14,9 +14,9 @@ from socnav_wm.config import STAGE_SECTIONS, Params, params_dict, select_section
 from socnav_wm.evaluation.figures import prediction_figure
 from socnav_wm.io import check_writable, outputs_together, write_json_atomic
 from socnav_wm.tracking import stage_run
-from socnav_wm.worldmodel.files import load_lstm, load_vae
+from socnav_wm.worldmodel.files import load_vae_lstm
+from socnav_wm.worldmodel.planning_file import load_residual
 from socnav_wm.worldmodel.prediction import error_table, evaluate_prediction
-from socnav_wm.worldmodel.residual import load_residual
 
 
 def run(
@@ -32,8 +32,12 @@ def run(
 ) -> dict[str, Any]:
     """Measure with the ``prediction`` section's settings, write ``out`` and ``figure``
     together, log to MLflow; returns the errors. ``planning_models``: one file per training seed
-    of the planning world model."""
+    of the planning world model. Every model is loaded first, and refused in one line when it
+    was made for other scenarios than ``params.env``."""
     check_writable(out, figure)
+    planners = [load_residual(path, params.env) for path in planning_models]
+    world_model = load_vae_lstm(vae, lstm, env_params=params.env)
+    policy = load_agent(agent, env_params=params.env) if agent is not None else None
     settings = {
         **select_sections(params_dict(params), STAGE_SECTIONS["predict"]),
         "files": {
@@ -45,9 +49,9 @@ def run(
         result = evaluate_prediction(
             params.env,
             params.prediction,
-            world_model=(load_vae(vae), load_lstm(lstm)),
-            agent=load_agent(agent) if agent is not None else None,
-            planning_models=[load_residual(path) for path in planning_models],
+            world_model=world_model,
+            agent=policy,
+            planning_models=planners,
         )
         with outputs_together(out, figure) as (out_tmp, figure_tmp):
             write_json_atomic(out_tmp, result)

@@ -7,6 +7,7 @@ from pathlib import Path
 from socnav_wm.config import Params
 from socnav_wm.evaluation.report import build_report
 from socnav_wm.layout import LAYOUT
+from socnav_wm.method_names import METHOD_NAMES
 from socnav_wm.planning.params import PLANNER_NAMES
 from socnav_wm.stages.common import open_stage
 
@@ -25,6 +26,13 @@ def run(
     prediction: Path | None,
     tracking: bool = True,
 ) -> str:
+    """The report of the evaluations in ``eval_dir``; refused in one line, before anything is
+    written, when it holds none."""
+    if not any((eval_dir / f"{method}.parquet").is_file() for method in METHOD_NAMES):
+        raise ValueError(
+            f"no evaluation found in {eval_dir} (no {{method}}.parquet; run `socnav-wm "
+            "evaluate --method …` first)"
+        )
     if documents is None:  # the results blocks of the README and the docs, where they exist
         documents = tuple(p for p in RESULTS_DOCUMENTS if p.is_file())
     with open_stage("report", "report", params, tracking=tracking) as run:

@@ -15,7 +15,6 @@ folders and the ``claims`` block of ``docs/studies.md``.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,13 @@ from typing import Any
 import pyarrow.parquet as pq
 
 from socnav_wm.evaluation.rendering import replace_marked_block
-from socnav_wm.io import outputs_together, write_json_atomic, write_text_atomic
+from socnav_wm.io import (
+    first_line,
+    outputs_together,
+    read_json,
+    write_json_atomic,
+    write_text_atomic,
+)
 from socnav_wm.tracking import stage_run
 
 HORIZON_ID = "horizon-two-steps-enough"
@@ -143,13 +148,48 @@ def claims_markdown(merged: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
+def _is_study_claims(name: str, found: Any) -> bool:
+    """``found`` has the shape of study ``name``'s ``claims.json``: for ``seeds`` a list of
+    claims with an id, a verdict and checks (status, evidence); for ``horizon`` a verdict and
+    its comparisons."""
+    if name == "horizon":
+        comparisons = found.get("comparisons") if isinstance(found, dict) else None
+        return (
+            isinstance(found, dict)
+            and isinstance(found.get("verdict"), str)
+            and isinstance(comparisons, list)
+            and all(isinstance(line, str) for line in comparisons)
+        )
+    return isinstance(found, list) and all(
+        isinstance(claim, dict)
+        and isinstance(claim.get("id"), str)
+        and isinstance(claim.get("verdict"), str)
+        and isinstance(claim.get("checks"), list)
+        and all(isinstance(c, dict) and {"status", "evidence"} <= c.keys() for c in claim["checks"])
+        for claim in found
+    )
+
+
 def _study(studies_dir: Path, name: str) -> tuple[Any, str] | None:
-    """A study's ``claims.json`` and what its runs are (None if it has not run)."""
+    """A study's ``claims.json`` and what its runs are (None if it has not run).
+
+    Raises:
+        ValueError: one line naming the file: its ``claims.json`` is not readable JSON, not of
+            the study's shape, or has no ``results.parquet`` beside it, or that is unreadable.
+    """
     folder = studies_dir / name
     claims, results = folder / "claims.json", folder / "results.parquet"
-    if not (claims.is_file() and results.is_file()):
+    if not claims.exists():
         return None
-    return json.loads(claims.read_text(encoding="utf-8")), study_seeds(results)
+    found = read_json(claims, "claims file")
+    if not _is_study_claims(name, found):
+        raise ValueError(f"{claims}: not the {name} study's claims (socnav-wm sweep writes them)")
+    if not results.is_file():
+        raise ValueError(f"{claims}: no results.parquet beside it (rerun the {name} study)")
+    try:
+        return found, study_seeds(results)
+    except (OSError, ValueError, KeyError) as exc:
+        raise ValueError(f"{results}: not a study's results ({first_line(exc)})") from None
 
 
 def run(
@@ -164,7 +204,9 @@ def run(
     ``documents``."""
     if not report_claims.is_file():
         raise FileNotFoundError(f"{report_claims}: no report claims (run `dvc repro report`)")
-    report = json.loads(report_claims.read_text(encoding="utf-8"))
+    report = read_json(report_claims, "claims file")
+    if not isinstance(report, dict):
+        raise ValueError(f"{report_claims}: not the report's claims (expected id → claim)")
     studies = {
         name: found
         for name in ("seeds", "horizon")

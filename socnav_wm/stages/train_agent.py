@@ -10,6 +10,7 @@ import torch
 from socnav_wm.agents.agent_file import agent_from_result, greedy_episodes, save_agent
 from socnav_wm.agents.checkpoint import checkpoint_file, run_identity
 from socnav_wm.agents.params import check_variant
+from socnav_wm.agents.served import ServedPolicy
 from socnav_wm.agents.training import (
     train_agent,
     training_metrics,
@@ -51,7 +52,9 @@ def run(
     log = log_dir / variant / f"seed-{seed}.parquet"
     metrics = metrics_dir / variant / f"seed-{seed}.json"
     check_writable(out, config_path(out), log, metrics)
-    with open_stage("train_agent", f"train-agent/{name}", params, tracking=tracking) as run:
+    files = {"inputs": (vae, lstm), "outputs": (out, config_path(out), log, metrics)}
+    run_name = f"train-agent/{name}"
+    with open_stage("train_agent", run_name, params, tracking=tracking, **files) as run:
         identity = run_identity(variant, p, params.env, seed, vae, lstm)
         checkpoint = checkpoint_file(checkpoint_dir, identity)
         if resume and checkpoint.exists():
@@ -86,6 +89,8 @@ def run(
             write_training_log(result.episodes, paths[2])
             write_json_atomic(paths[3], summary)
         run.log_metrics({k: float(v) for k, v in summary.items() if v is not None})
+        headline = ("greedy_success_rate", "greedy_collision_rate", "episodes_to_solve")
+        run.log_headline({k: float(summary[k]) for k in headline if summary[k] is not None})
         for selection_run in result.selection:
             run.log_metrics(
                 {"selection_success_rate": selection_run["success_rate"]},
@@ -93,9 +98,17 @@ def run(
             )
         run.log_artifact(out)
         run.log_artifact(config_path(out))
-        q = result.q_network
-        features = torch.zeros(1, q.input_dim, dtype=next(q.parameters()).dtype)
-        log_torch_model(run, q, {"features": features}, ("q_values",))
+        agent = agent_from_result(result)
+        observations = torch.zeros(1, 2, agent.variant.obs_dim)
+        log_torch_model(
+            run,
+            ServedPolicy(agent),
+            observations,
+            ("observations", "greedy_actions"),
+            name=f"{variant}-seed-{seed}",
+            model_type="agent",
+            variable_axes=2,
+        )
         if not keep_checkpoint:
             checkpoint.unlink(missing_ok=True)
     solved = summary["episodes_to_solve"]

@@ -3,23 +3,23 @@ motion exact, plus a learned correction of each human's velocity) on the rollout
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Unpack
 
 import torch
 
 from socnav_wm.config import Params
-from socnav_wm.io import check_writable
 from socnav_wm.layout import planning_model_file
-from socnav_wm.progress import progress
 from socnav_wm.stages.common import (
-    config_path,
-    epoch_logger,
+    StageOptions,
+    WorldModelOutputs,
     log_torch_model,
-    open_stage,
-    world_model_outputs,
+    world_model_stage,
 )
-from socnav_wm.worldmodel.residual import fit_residual, save_residual
+from socnav_wm.worldmodel.planning_file import save_residual
+from socnav_wm.worldmodel.residual import fit_residual
+from socnav_wm.worldmodel.served_planning import ServedPlanningModel
 
 
 def run(
@@ -29,39 +29,40 @@ def run(
     rollouts: Path,
     out_dir: Path,
     metrics_dir: Path,
-    tracking: bool = True,
-    quiet: bool = True,
+    **options: Unpack[StageOptions],
 ) -> str:
     p = params.planning_model
     if seed not in p.seeds:
         raise ValueError(f"seed {seed} is not in planning_model.seeds {p.seeds}")
     out = planning_model_file(out_dir, seed)
-    metrics = metrics_dir / f"seed-{seed}.json"
-    history = metrics_dir / f"seed-{seed}_history.json"
-    check_writable(out, config_path(out), metrics, history)
+    outputs = WorldModelOutputs(
+        out=out,
+        metrics=metrics_dir / f"seed-{seed}.json",
+        history=metrics_dir / f"seed-{seed}_history.json",
+        **options,
+    )
     run_name = f"train-planning-model/seed-{seed}"
-    with open_stage("train_planning_model", run_name, params, tracking=tracking) as run:
-        with progress(p.max_epochs, run_name, quiet=quiet, unit="epochs") as bar:
-            result = fit_residual(
-                rollouts,
-                params.env,
-                p,
-                seed=seed,
-                on_epoch=epoch_logger(run, bar),
-            )
+    with world_model_stage("train_planning_model", run_name, params, outputs, (rollouts,)) as stage:
+        result = stage.fit(p.max_epochs, partial(fit_residual, rollouts, params.env, p, seed=seed))
         summary: dict[str, Any] = {"seed": seed, **result.metrics}
         settings = {"seed": seed, **p.to_dict()}
-        world_model_outputs(
-            "train_planning_model", run, params,
-            lambda path: save_residual(path, result, settings),
-            out, metrics, history, summary, result.history,
-        )  # fmt: skip
-        points = torch.zeros(1, 1 + result.model.num_humans, 2)
-        speeds = {"v": torch.zeros(1), "omega": torch.zeros(1)}
-        motion = {"points": points, "velocity": points, **speeds}
-        if p.room:
-            motion["pose"] = torch.zeros(1, 3)
-        log_torch_model(run, result.model, motion, ("velocity_change",))
+        stage.publish(lambda path: save_residual(path, result, settings), summary, result.history)
+        stage.run.log_headline(
+            {
+                "best_val_loss": result.metrics["val_loss"],
+                "val_loss_constant_velocity": result.metrics["val_loss_constant_velocity"],
+            },
+            units={"best_val_loss": "m", "val_loss_constant_velocity": "m"},
+        )
+        served = ServedPlanningModel(result.model)
+        log_torch_model(
+            stage.run,
+            served,
+            torch.zeros(1, served.input_dim),
+            ("scene", "velocity_change"),
+            name=f"planning-model-seed-{seed}",
+            model_type="planning-model",
+        )
     m = result.metrics
     return (
         f"wrote {out}: {m['train_samples']} training samples; best epoch {m['best_epoch']} of "

@@ -13,12 +13,16 @@ this module imports ray, and only inside :func:`run_sweep`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import signal
+import socket
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -181,6 +185,46 @@ def _run_metrics(run_dir: Path, spec: RunSpec) -> dict[str, float]:
 # ---------------------------------------------------------------------------------------------
 
 
+RAY_CONNECT_TIMEOUT_S = 10.0
+"""How long ``sweep --address HOST:PORT`` waits for the cluster to answer (Ray itself would
+retry for ever)."""
+
+
+def _endpoint(address: str | None) -> tuple[str, int] | None:
+    """``(host, port)`` of ``HOST:PORT`` or ``ray://HOST:PORT``; None for a local Ray,
+    ``auto`` and whatever else Ray resolves itself."""
+    if address is None or address in ("auto", "local"):
+        return None
+    rest = address.split("://", 1)[1] if "://" in address else address
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port.isdigit():
+        return None
+    return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def check_reachable(address: str | None, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Fail in one line when nothing answers at a cluster ``address`` (``HOST:PORT``) within
+    ``timeout_s``, before ``ray.init``, which would retry for ever.
+
+    Raises:
+        ConfigError: ``--address …: no Ray cluster answers there (…)``.
+    """
+    endpoint = _endpoint(address)
+    if endpoint is None:
+        return
+    try:
+        with socket.create_connection(endpoint, timeout=timeout_s):
+            pass
+    except OSError as exc:
+        if isinstance(exc, ConnectionRefusedError):
+            reason = "connection refused"
+        elif isinstance(exc, TimeoutError):
+            reason = f"no answer within {timeout_s:g} s"
+        else:
+            reason = (exc.strerror or _first_line(exc)).lower()
+        raise ConfigError(f"--address {address}: no Ray cluster answers there ({reason})") from None
+
+
 def _import_ray() -> Any:
     try:
         import ray
@@ -205,11 +249,13 @@ def run_sweep(
     cpus: int | None = None,
     tracking: bool = True,
     progress: Callable[[str], None] | None = None,
+    connect_timeout_s: float = RAY_CONNECT_TIMEOUT_S,
 ) -> SweepResult:
     """Run ``plan``'s unfinished runs as Ray tasks, then write its results (see the module
     docstring). ``address``: a running Ray cluster (``auto``, ``HOST:PORT``, ``ray://…``); else a
     local Ray with ``cpus`` CPUs (default: every core). ``progress`` receives one line per
-    change (default: standard error)."""
+    change (default: standard error). ``connect_timeout_s``: how long a cluster at
+    ``address`` may take to answer (:func:`check_reachable`)."""
     say = progress or (lambda line: print(line, file=sys.stderr, flush=True))
     if cpus is not None and cpus < 1:
         raise ConfigError(f"--cpus: must be >= 1, got {cpus}")
@@ -234,10 +280,70 @@ def run_sweep(
     )
     if todo:
         ray = _import_ray()
-        _run_tasks(ray, plan, todo, outcome, address, cpus, tracking, say)
+        _run_tasks(ray, plan, todo, outcome, address, cpus, tracking, say, connect_timeout_s)
     outcome.wall_s = time.time() - started
     write_results(outcome)
     return outcome
+
+
+class _TimeUp(BaseException):
+    """:func:`_time_limit` ran out (a BaseException: Ray's retry loops catch Exception)."""
+
+
+@contextlib.contextmanager
+def _time_limit(seconds: float | None) -> Iterator[None]:
+    """Raise :class:`_TimeUp` in the block after ``seconds`` (a real-time timer; checked
+    between Ray's own blocking calls). No limit: ``None``, off the main thread, or Windows."""
+    main = threading.current_thread() is threading.main_thread()
+    if seconds is None or not main or not hasattr(signal, "setitimer"):
+        yield
+        return
+
+    def time_up(signum: int, frame: Any) -> None:
+        raise _TimeUp
+
+    previous = signal.signal(signal.SIGALRM, time_up)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@contextlib.contextmanager
+def _caller_sigterm() -> Iterator[Callable[[], None]]:
+    """Keep SIGTERM's meaning to the caller (the command line's: one line, exit status 143)
+    while Ray runs: ``ray.init`` installs its own handler (exit 1 and a crash dump) and Ray's
+    waits turn whatever a handler raises into a plain ``KeyboardInterrupt``. Yields the call
+    that puts the caller's handler back (after ``ray.init``); the exception the caller's
+    handler raised comes out of the block as itself."""
+    main = threading.current_thread() is threading.main_thread()
+    handler = signal.getsignal(signal.SIGTERM) if main else None
+    if not callable(handler):
+        yield lambda: None
+        return
+    raised: list[BaseException] = []
+
+    def on_sigterm(signum: int, frame: Any) -> None:
+        try:
+            handler(signum, frame)
+        except BaseException as exc:
+            raised.append(exc)
+            raise
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, on_sigterm)
+
+    restore()
+    try:
+        yield restore
+    except KeyboardInterrupt as exc:
+        if raised and exc is not raised[-1]:
+            raise raised[-1] from None
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, handler)
 
 
 def _run_tasks(
@@ -249,75 +355,87 @@ def _run_tasks(
     cpus: int | None,
     tracking: bool,
     say: Callable[[str], None],
+    connect_timeout_s: float = RAY_CONNECT_TIMEOUT_S,
 ) -> None:
     from socnav_wm import tracking as track
 
-    started_here = not ray.is_initialized()
-    if started_here:
-        options: dict[str, Any] = {
-            "include_dashboard": False,
-            "logging_level": "ERROR",
-            "log_to_driver": False,
-        }
-        if address is None:
-            options.update(num_cpus=cpus or os.cpu_count() or 1, object_store_memory=200 << 20)
-        try:
-            ray.init(address=address, **options)
-        except (ConnectionError, RuntimeError, ValueError) as exc:
-            where = f"--address {address}" if address else "local Ray"
-            raise ConfigError(f"{where}: Ray did not start ({_first_line(exc)})") from None
-    slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
-    logged = {"study": plan.study.model_dump(), "runs": len(plan.runs)}
-    try:
-        with track.stage_run(
-            "sweep", logged, enabled=tracking, run_name=f"sweep/{plan.name}"
-        ) as parent:
-            parent.set_tag("sweep", plan.name)
-            uri = track.tracking_uri() if tracking else None
-            task = ray.remote(num_cpus=1, max_retries=0)(execute_run)
-            pending = {}
-            for run in todo:
-                job = RunJob(
-                    spec=run,
-                    params=params_dict(plan.params[run]),
-                    fingerprint=plan.fingerprints[run],
-                    run_dir=str(plan.run_dir(run).resolve()),
-                    checkpoint_dir=str((plan.runs_dir / "checkpoints").resolve()),
-                    vae=str(plan.vae.resolve()),
-                    lstm=str(plan.lstm.resolve()),
-                    tracking=tracking,
-                    tracking_uri=uri,
-                    experiment=track.experiment_name() if tracking else None,
-                    parent_run_id=parent.run_id,
-                )
-                pending[task.remote(job)] = run
-            durations: list[float] = []
-            done = failed = 0
-            while pending:
-                ready, _ = ray.wait(list(pending), num_returns=1)
-                for ref in ready:
-                    run = pending.pop(ref)
-                    try:
-                        result = ray.get(ref)
-                    except Exception as exc:  # noqa: BLE001 - a dead worker fails one run
-                        result = {"run": run.name, "status": "failed", "error": _first_line(exc)}
-                    outcome.results[run] = result
-                    if result["status"] == "done":
-                        done += 1
-                        durations.append(float(result.get("wall_s", 0.0)))
-                    else:
-                        failed += 1
-                        say(f"sweep {plan.name}: run {run.name} failed: {result['error']}")
-                running = min(len(pending), slots)
-                say(
-                    f"sweep {plan.name}: {done + failed}/{len(todo)} finished ({done} done, "
-                    f"{failed} failed), {running} running, "
-                    f"{_eta(durations, len(pending), slots)} left"
-                )
-            parent.log_metrics({"runs_done": done, "runs_failed": failed})
-    finally:
+    with _caller_sigterm() as restore_sigterm:
+        started_here = not ray.is_initialized()
         if started_here:
-            ray.shutdown()
+            options: dict[str, Any] = {
+                "include_dashboard": False,
+                "logging_level": "ERROR",
+                "log_to_driver": False,
+            }
+            if address is None:
+                options.update(num_cpus=cpus or os.cpu_count() or 1, object_store_memory=200 << 20)
+            check_reachable(address, connect_timeout_s)
+            try:
+                with _time_limit(connect_timeout_s if address is not None else None):
+                    ray.init(address=address, **options)
+            except _TimeUp:
+                ray.shutdown()
+                raise ConfigError(
+                    f"--address {address}: no Ray cluster answered within {connect_timeout_s:g} s"
+                ) from None
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                where = f"--address {address}" if address else "local Ray"
+                raise ConfigError(f"{where}: Ray did not start ({_first_line(exc)})") from None
+            finally:
+                restore_sigterm()  # ray.init installed its own
+        slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        logged = {"study": plan.study.model_dump(), "runs": len(plan.runs)}
+        try:
+            with track.stage_run(
+                "sweep", logged, enabled=tracking, run_name=f"sweep/{plan.name}"
+            ) as parent:
+                parent.set_tag("sweep", plan.name)
+                uri = track.tracking_uri() if tracking else None
+                task = ray.remote(num_cpus=1, max_retries=0)(execute_run)
+                pending = {}
+                for run in todo:
+                    job = RunJob(
+                        spec=run,
+                        params=params_dict(plan.params[run]),
+                        fingerprint=plan.fingerprints[run],
+                        run_dir=str(plan.run_dir(run).resolve()),
+                        checkpoint_dir=str((plan.runs_dir / "checkpoints").resolve()),
+                        vae=str(plan.vae.resolve()),
+                        lstm=str(plan.lstm.resolve()),
+                        tracking=tracking,
+                        tracking_uri=uri,
+                        experiment=track.experiment_name() if tracking else None,
+                        parent_run_id=parent.run_id,
+                    )
+                    pending[task.remote(job)] = run
+                durations: list[float] = []
+                done = failed = 0
+                while pending:
+                    ready, _ = ray.wait(list(pending), num_returns=1)
+                    for ref in ready:
+                        run = pending.pop(ref)
+                        try:
+                            result = ray.get(ref)
+                        except Exception as exc:  # noqa: BLE001 - a dead worker fails one run
+                            error = _first_line(exc)
+                            result = {"run": run.name, "status": "failed", "error": error}
+                        outcome.results[run] = result
+                        if result["status"] == "done":
+                            done += 1
+                            durations.append(float(result.get("wall_s", 0.0)))
+                        else:
+                            failed += 1
+                            say(f"sweep {plan.name}: run {run.name} failed: {result['error']}")
+                    running = min(len(pending), slots)
+                    say(
+                        f"sweep {plan.name}: {done + failed}/{len(todo)} finished ({done} done, "
+                        f"{failed} failed), {running} running, "
+                        f"{_eta(durations, len(pending), slots)} left"
+                    )
+                parent.log_metrics({"runs_done": done, "runs_failed": failed})
+        finally:
+            if started_here:
+                ray.shutdown()
 
 
 def describe(outcome: SweepResult) -> str:

@@ -2,8 +2,11 @@
 and read back from.
 
 A VAE or LSTM file is a ``torch.save`` of plain values (``format`` :data:`CHECKPOINT_FORMAT`,
-its version, the model's kind, its hyperparameters, CPU weights and ``extra``), written
-atomically and read with ``weights_only=True``.
+its version, the model's kind, its hyperparameters, CPU weights, ``extra`` and ``env``: the
+scenarios of the data it was trained on), written atomically and read with
+``weights_only=True``. Given the params' ``env``, the loaders refuse a model made for other
+scenarios (:func:`socnav_wm.data.compatibility.check_made_with`; a file written before ``env``
+was recorded: a VAE by the size of its observations, an LSTM not at all).
 """
 
 from __future__ import annotations
@@ -14,18 +17,16 @@ from typing import Any
 
 import torch
 
+from socnav_wm.data.compatibility import check_made_with, observation_record
 from socnav_wm.devices import resolve_device
-from socnav_wm.io import atomic_path, first_line, load_saved
+from socnav_wm.env.params import EnvParams
+from socnav_wm.io import ModelFileError, atomic_path, first_line, load_saved
 from socnav_wm.worldmodel.lstm import LatentLSTM
 from socnav_wm.worldmodel.training import LSTMTrainResult, VAETrainResult
 from socnav_wm.worldmodel.vae import VAE
 
 CHECKPOINT_FORMAT = "socnav-wm-model"
 CHECKPOINT_FORMAT_VERSION = 1
-
-
-class ModelFileError(ValueError):
-    """A model file is missing, unreadable, or not the expected kind (one-line message)."""
 
 
 def _plain(value: Any) -> Any:
@@ -41,7 +42,13 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _save_model(path: str | Path, kind: str, model: torch.nn.Module, extra: Any) -> None:
+def _save_model(
+    path: str | Path,
+    kind: str,
+    model: torch.nn.Module,
+    extra: Any,
+    env: Mapping[str, Any] | None,
+) -> None:
     payload = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_FORMAT_VERSION,
@@ -49,6 +56,7 @@ def _save_model(path: str | Path, kind: str, model: torch.nn.Module, extra: Any)
         "hyperparameters": model.hyperparameters(),  # type: ignore[operator]
         "state_dict": {key: value.detach().cpu() for key, value in model.state_dict().items()},
         "extra": _plain(extra or {}),
+        "env": _plain(env) if env is not None else None,
     }
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
@@ -89,15 +97,27 @@ def save_vae(
     """Write a VAE (weights, normalisation buffers, sizes, ``extra``) to ``path`` atomically.
 
     ``extra`` holds plain values (numbers, strings, lists, dicts; numpy values are converted),
-    e.g. the validation metrics and the data it was trained on.
+    e.g. the validation metrics and the data it was trained on. A :class:`VAETrainResult`'s
+    ``env`` is saved with it.
     """
-    vae = model.model if isinstance(model, VAETrainResult) else model
-    _save_model(path, "vae", vae, extra)
+    if isinstance(model, VAETrainResult):
+        _save_model(path, "vae", model.model, extra, model.env)
+    else:
+        _save_model(path, "vae", model, extra, None)
 
 
-def load_vae(path: str | Path, device: torch.device | str = "cpu") -> VAE:
-    """Load a VAE written by :func:`save_vae`, in eval mode on ``device``."""
-    return _build(Path(path), load_checkpoint(path, "vae"), VAE, device)
+def load_vae(
+    path: str | Path, device: torch.device | str = "cpu", env_params: EnvParams | None = None
+) -> VAE:
+    """Load a VAE written by :func:`save_vae`, in eval mode on ``device``; refused when it was
+    trained for other scenarios than ``env_params`` (None: not checked)."""
+    payload = load_checkpoint(path, "vae")
+    made = payload.get("env")
+    if not isinstance(made, dict):  # written before the scenarios were recorded
+        input_dim = (payload.get("hyperparameters") or {}).get("input_dim")
+        made = observation_record(input_dim) if isinstance(input_dim, int) else None
+    check_made_with(path, made, env_params, error=ModelFileError)
+    return _build(Path(path), payload, VAE, device)
 
 
 def save_lstm(
@@ -105,11 +125,39 @@ def save_lstm(
     model: LatentLSTM | LSTMTrainResult,
     extra: Mapping[str, Any] | None = None,
 ) -> None:
-    """Write a latent LSTM (weights, sizes, ``extra``) to ``path`` atomically."""
-    lstm = model.model if isinstance(model, LSTMTrainResult) else model
-    _save_model(path, "lstm", lstm, extra)
+    """Write a latent LSTM (weights, sizes, ``extra``, an :class:`LSTMTrainResult`'s ``env``) to
+    ``path`` atomically."""
+    if isinstance(model, LSTMTrainResult):
+        _save_model(path, "lstm", model.model, extra, model.env)
+    else:
+        _save_model(path, "lstm", model, extra, None)
 
 
-def load_lstm(path: str | Path, device: torch.device | str = "cpu") -> LatentLSTM:
-    """Load a latent LSTM written by :func:`save_lstm`, in eval mode on ``device``."""
-    return _build(Path(path), load_checkpoint(path, "lstm"), LatentLSTM, device)
+def load_lstm(
+    path: str | Path, device: torch.device | str = "cpu", env_params: EnvParams | None = None
+) -> LatentLSTM:
+    """Load a latent LSTM written by :func:`save_lstm`, in eval mode on ``device``; refused when
+    it was trained for other scenarios than ``env_params`` (None, or a file that does not
+    record them: not checked)."""
+    payload = load_checkpoint(path, "lstm")
+    made = payload.get("env") if isinstance(payload.get("env"), dict) else None
+    check_made_with(path, made, env_params, error=ModelFileError)
+    return _build(Path(path), payload, LatentLSTM, device)
+
+
+def load_vae_lstm(
+    vae_path: str | Path,
+    lstm_path: str | Path,
+    device: torch.device | str = "cpu",
+    env_params: EnvParams | None = None,
+) -> tuple[VAE, LatentLSTM]:
+    """The paper's world model: :func:`load_vae` and :func:`load_lstm`, and the LSTM must
+    predict the latents the VAE encodes (ModelFileError naming both files otherwise)."""
+    vae = load_vae(vae_path, device, env_params)
+    lstm = load_lstm(lstm_path, device, env_params)
+    if lstm.latent_dim != vae.latent_dim:
+        raise ModelFileError(
+            f"{lstm_path}: predicts {lstm.latent_dim}-d latents, the VAE {vae_path} encodes "
+            f"{vae.latent_dim}-d ones"
+        )
+    return vae, lstm

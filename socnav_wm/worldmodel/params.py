@@ -8,7 +8,7 @@ from typing import ClassVar
 
 from pydantic import Field, field_validator
 
-from socnav_wm.section import Device, Section, distinct_non_negative
+from socnav_wm.section import Device, Section, Seed, distinct_non_negative, seed_field
 
 __all__ = ["LstmParams", "PlanningModelParams", "PredictionParams", "VaeParams"]
 
@@ -113,7 +113,7 @@ class PredictionParams(Section):
 
     episodes: int = Field(300, gt=0)
     """Scenarios per policy."""
-    scenario_seed: int = Field(2_000_003, ge=0)
+    scenario_seed: Seed = seed_field(2_000_003)
     """Their seed: neither a training, a validation nor the test seed."""
     warmup: int = Field(5, gt=0)
     """Real steps before each open-loop rollout."""

@@ -33,8 +33,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from socnav_wm.data.compatibility import made_with
 from socnav_wm.env.core import discrete_commands
 from socnav_wm.env.params import EnvParams
+from socnav_wm.resources import build_trainable
 from socnav_wm.worldmodel.ego import human_velocities, positions
 from socnav_wm.worldmodel.fitting import EpochCallback, Fit, fit
 from socnav_wm.worldmodel.params import PlanningModelParams
@@ -360,6 +362,8 @@ class ResidualTrainResult:
     model: ResidualDynamics
     history: list[dict[str, float]]
     metrics: dict[str, float]
+    env: dict[str, Any] | None = None
+    """The scenarios it was trained for (:func:`socnav_wm.data.compatibility.made_with`)."""
 
 
 def train_residual(
@@ -382,12 +386,16 @@ def train_residual(
     are the caller's (the samples are already made)."""
     room, relative_weight = params.room, params.relative_weight
     torch.manual_seed(seed)
-    model = ResidualDynamics(
-        env_params.num_humans,
-        params.hidden_dim,
-        env_params.dt,
-        env_params.human_max_speed,
-        env_params.spawn_half_size if room else None,
+    model = build_trainable(
+        "planning_model.hidden_dim",
+        f"the planning model (hidden_dim {params.hidden_dim})",
+        lambda: ResidualDynamics(
+            env_params.num_humans,
+            params.hidden_dim,
+            env_params.dt,
+            env_params.human_max_speed,
+            env_params.spawn_half_size if room else None,
+        ),
     )
     if room and (train.pose is None or val.pose is None):
         raise ValueError("planning_model.room: the training samples carry no robot poses")
@@ -471,7 +479,9 @@ def train_residual(
         "train_samples": len(train),
         "cpu_seconds": time.process_time() - start,
     }
-    return ResidualTrainResult(model=model, history=history, metrics=metrics)
+    return ResidualTrainResult(
+        model=model, history=history, metrics=metrics, env=made_with(env_params)
+    )
 
 
 def residual_positions(
@@ -507,40 +517,6 @@ def residual_positions(
     return out
 
 
-def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, Any]) -> None:
-    """The model's weights and what rebuilds it (torch.save)."""
-    torch.save(
-        {
-            "format": "socnav-wm residual-cv",
-            "state_dict": result.model.state_dict(),
-            "num_humans": result.model.num_humans,
-            "hidden_dim": result.model.net[0].out_features,
-            "dt": result.model.dt,
-            "max_speed": result.model.max_speed,
-            "room_half": result.model.room_half,
-            "settings": settings,
-            "metrics": result.metrics,
-        },
-        path,
-    )
-
-
-def load_residual(path: Any) -> ResidualDynamics:
-    """A model written by :func:`save_residual`; one line when the file is not one."""
-    data = torch.load(path, map_location="cpu", weights_only=True)
-    if not isinstance(data, dict) or data.get("format") != "socnav-wm residual-cv":
-        raise ValueError(f"{path}: not a socnav-wm residual-cv planning model")
-    model = ResidualDynamics(
-        data["num_humans"],
-        data["hidden_dim"],
-        data["dt"],
-        data.get("max_speed"),
-        data.get("room_half"),
-    )
-    model.load_state_dict(data["state_dict"])
-    return model.eval()
-
-
 def fit_residual(
     rollouts: Any,
     env_params: EnvParams,
@@ -550,7 +526,9 @@ def fit_residual(
     on_epoch: EpochCallback | None = None,
 ) -> ResidualTrainResult:
     """Train on the rollouts' training episodes, validate on the held-out ones (split as the
-    VAE's and the LSTM's, by episode with ``seed`` and ``params.val_fraction``)."""
+    VAE's and the LSTM's, by episode with ``seed`` and ``params.val_fraction``); the rollouts
+    must have been collected in the scenarios of ``env_params``. Saved by
+    :func:`socnav_wm.worldmodel.planning_file.save_residual`."""
     from socnav_wm.data.shards import column_to_numpy, read_rollouts
     from socnav_wm.data.windows import split_episodes
 
@@ -559,7 +537,8 @@ def fit_residual(
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
     poses = ["robot_x", "robot_y", "robot_theta"]
-    table = read_rollouts(rollouts, columns=["episode_id", "obs", "action", "next_obs", *poses])
+    columns = ["episode_id", "obs", "action", "next_obs", *poses]
+    table = read_rollouts(rollouts, columns=columns, env_params=env_params)
     ids = column_to_numpy(table, "episode_id")
     obs = column_to_numpy(table, "obs")
     actions = column_to_numpy(table, "action").astype(np.int64)

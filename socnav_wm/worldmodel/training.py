@@ -10,12 +10,14 @@ section's ``device``; nothing is hard-wired to CUDA.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
 
 from socnav_wm.data.windows import Windows
 from socnav_wm.devices import as_tensor, resolve_device
+from socnav_wm.resources import build_trainable
 from socnav_wm.worldmodel.evaluation import evaluate_vae, lstm_val_loss
 from socnav_wm.worldmodel.fitting import EpochCallback, Fit, fit
 from socnav_wm.worldmodel.lstm import LatentLSTM, masked_mse
@@ -34,11 +36,14 @@ class VAETrainResult:
         metrics: final validation metrics of the restored model (see
             :func:`~socnav_wm.worldmodel.evaluation.evaluate_vae`) plus best_epoch and
             epochs_run.
+        env: the scenarios of the data it was trained on
+            (:func:`socnav_wm.data.compatibility.made_with`), saved with it; None: unknown.
     """
 
     model: VAE
     history: list[dict[str, float]] = field(default_factory=list)
     metrics: dict[str, float] = field(default_factory=dict)
+    env: dict[str, Any] | None = None
 
 
 @dataclass
@@ -49,11 +54,13 @@ class LSTMTrainResult:
         model: the LSTM with the weights of the best validation epoch, in eval mode.
         history: one dict per epoch: epoch, train_loss, val_loss, seconds.
         metrics: val_loss (teacher-forced masked MSE per latent dim), best_epoch, epochs_run.
+        env: the scenarios of the data it was trained on, saved with it; None: unknown.
     """
 
     model: LatentLSTM
     history: list[dict[str, float]] = field(default_factory=list)
     metrics: dict[str, float] = field(default_factory=dict)
+    env: dict[str, Any] | None = None
 
 
 def train_vae(
@@ -90,7 +97,11 @@ def train_vae(
     if train_obs.ndim != 2 or len(train_obs) == 0 or len(val_obs) == 0:
         raise ValueError("train_vae needs non-empty (n, input_dim) train and validation arrays")
     torch.manual_seed(seed)
-    model = VAE(train_obs.shape[1], params.hidden_dim, params.latent_dim)
+    model = build_trainable(
+        "vae.hidden_dim",
+        f"the VAE (hidden_dim {params.hidden_dim}, latent_dim {params.latent_dim})",
+        lambda: VAE(train_obs.shape[1], params.hidden_dim, params.latent_dim),
+    )
     model.fit_normalization(train_obs)
     model.to(device)
     train_x = as_tensor(train_obs, device)
@@ -147,21 +158,24 @@ def train_lstm(
         params: the hidden size, the optimisation and the device (``seq_len`` and
             ``val_fraction`` are the caller's: the windows are already made).
         seed: seed of initialisation and shuffling.
-        on_epoch: optional progress/logging callback ``(epoch, metrics)``.
+        on_epoch: as for :func:`train_vae`.
 
     Returns:
         :class:`LSTMTrainResult` with the best-validation weights restored.
 
     Raises:
-        NonFiniteTrainingError: a training or validation loss, or a weight at the end of an
-            epoch, is NaN or infinite (before ``on_epoch`` sees that epoch).
+        NonFiniteTrainingError: as :func:`train_vae` does.
     """
     device = resolve_device(params.device)
     if train_windows.num_windows == 0 or val_windows.num_windows == 0:
         raise ValueError("train_lstm needs non-empty train and validation windows")
     torch.manual_seed(seed)
     latent_dim = train_windows.inputs_z.shape[-1]
-    model = LatentLSTM(latent_dim, hidden_dim=params.hidden_dim).to(device)  # 4 actions
+    model = build_trainable(
+        "lstm.hidden_dim",
+        f"the LSTM (hidden_dim {params.hidden_dim})",
+        lambda: LatentLSTM(latent_dim, hidden_dim=params.hidden_dim),  # 4 actions
+    ).to(device)
     train = train_windows.to(device)
 
     def batch_loss(index: torch.Tensor) -> tuple[torch.Tensor, float]:

@@ -151,15 +151,41 @@ def test_counter_based_draws_are_uniform_and_keyed() -> None:
 
 
 def test_impossible_room_gives_a_clear_error() -> None:
-    # More discs than the room's area: refused with the parameters, in one line.
+    # More discs than spawning places reliably: refused with the parameters, in one line.
     with pytest.raises(ValueError, match="env.num_humans: 60 humans and their goals cannot"):
         EnvParams(num_humans=60, room_size=3.0, spawn_margin=0.3)
-    with pytest.raises(ValueError, match="at most"):
+    with pytest.raises(ValueError, match="at most 40 here"):
         EnvParams(num_humans=100_000)
-    # Within the area but too crowded to draw discs that touch nothing: spawning says so.
-    sim = Simulator(1, EnvParams(num_humans=9, room_size=3.0, spawn_margin=0.3))
-    with pytest.raises(RuntimeError, match="could not place 9 humans"):
+    # Within the area but too crowded to draw discs that touch nothing (half of the scenarios
+    # of 60 humans in the paper's room fail): refused too, before any work.
+    with pytest.raises(ValueError, match="env.num_humans: 60 humans .*at most 40 here"):
+        EnvParams(num_humans=60)
+    # Parameters that skip validation: spawning still says so.
+    crowded = EnvParams.model_construct(**{**EnvParams().model_dump(), "num_humans": 60})
+    sim = Simulator(64, crowded)
+    with pytest.raises(RuntimeError, match="could not place 60 humans"):
         sim.reset(seed=0)
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {},
+        {"room_size": 6.0},
+        {"room_size": 20.0},
+        {"human_radius": 0.6, "human_goal_radius": 0.1},
+        {"goal_radius": 1.0},
+        {"min_goal_distance": 5.0},
+    ],
+)
+def test_the_most_humans_the_room_takes_always_spawn(changes: dict) -> None:
+    # At the bound the validation gives, 2,000 scenarios spawn without running out of
+    # attempts; one human more is refused.
+    most = EnvParams(num_humans=0, **changes).most_humans
+    with pytest.raises(ValueError, match=f"at most {most} here"):
+        EnvParams(num_humans=most + 1, **changes)
+    sim = Simulator(2000, EnvParams(num_humans=most, **changes))
+    sim.reset(seed=11)
 
 
 @pytest.fixture(scope="module")

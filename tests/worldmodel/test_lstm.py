@@ -10,6 +10,7 @@ from matplotlib.figure import Figure
 
 from socnav_wm.data.shards import RolloutError
 from socnav_wm.data.windows import Windows, make_windows, split_episodes
+from socnav_wm.env.params import EnvParams
 from socnav_wm.worldmodel.evaluation import evaluate_lstm
 from socnav_wm.worldmodel.figures import plot_latent_predictions
 from socnav_wm.worldmodel.files import load_lstm, save_lstm, save_vae
@@ -213,5 +214,7 @@ def test_fit_lstm_refuses_a_shard_with_a_nan_next_observation(tmp_path: Path) ->
     vae = tmp_path / "vae.pt"
     save_vae(vae, VAE(23, 16, LATENT))
     with pytest.raises(RolloutError) as error:
-        fit_lstm(tmp_path / "rollouts", vae, LstmParams(max_epochs=1, hidden_dim=16), seed=0)
+        fit_lstm(
+            tmp_path / "rollouts", vae, EnvParams(), LstmParams(max_epochs=1, hidden_dim=16), seed=0
+        )
     assert str(error.value) == f"{path}: row 12, column next_obs[3]: not finite (nan)"

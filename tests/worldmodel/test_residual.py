@@ -11,7 +11,7 @@ from socnav_wm.planning.models import ConstantVelocityModel
 from socnav_wm.planning.mpc import Planner
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.planning.residual import ResidualPlanningModel
-from socnav_wm.worldmodel import residual
+from socnav_wm.worldmodel import planning_file, residual
 from socnav_wm.worldmodel.ego import advance, commands_of, positions, predict_positions
 from socnav_wm.worldmodel.params import PlanningModelParams
 from socnav_wm.worldmodel.prediction import random_policy, record
@@ -174,13 +174,13 @@ def test_save_and_load_round_trip_and_refuse_other_files(tmp_path) -> None:
     model = perturbed(2)
     result = residual.ResidualTrainResult(model=model, history=[], metrics={})
     path = tmp_path / "m.pt"
-    residual.save_residual(path, result, {"seed": 0})
-    loaded = residual.load_residual(path)
+    planning_file.save_residual(path, result, {"seed": 0})
+    loaded = planning_file.load_residual(path)
     for a, b in zip(model.state_dict().values(), loaded.state_dict().values(), strict=True):
         torch.testing.assert_close(a, b)
     torch.save({"format": "other"}, tmp_path / "x.pt")
-    with pytest.raises(ValueError, match="not a socnav-wm residual-cv planning model"):
-        residual.load_residual(tmp_path / "x.pt")
+    with pytest.raises(ValueError, match="x.pt: not a socnav-wm planning model"):
+        planning_file.load_residual(tmp_path / "x.pt")
 
 
 def test_room_features_place_a_person_in_the_room_from_the_robot_pose() -> None:

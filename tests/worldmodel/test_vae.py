@@ -10,6 +10,7 @@ import torch
 from matplotlib.figure import Figure
 
 from socnav_wm.data.shards import RolloutError
+from socnav_wm.env.params import EnvParams
 from socnav_wm.worldmodel import evaluation, training
 from socnav_wm.worldmodel.evaluation import encode_observations
 from socnav_wm.worldmodel.figures import plot_reconstruction
@@ -239,5 +240,5 @@ def test_fit_vae_refuses_a_shard_with_a_nan_observation(tmp_path: Path) -> None:
     episodes["obs"][64, 5] = np.nan
     paths = write_dataset(tmp_path, [episodes], max_rows=60)
     with pytest.raises(RolloutError) as error:
-        fit_vae(tmp_path, VaeParams(max_epochs=1, hidden_dim=16, latent_dim=4), seed=0)
+        fit_vae(tmp_path, EnvParams(), VaeParams(max_epochs=1, hidden_dim=16, latent_dim=4), seed=0)
     assert str(error.value) == f"{paths[1]}: row 4, column obs[5]: not finite (nan)"

@@ -1,0 +1,91 @@
+"""The one check that a model or data file fits the scenarios it is used with.
+
+Every file made from the simulator records the scenarios it was made with (:func:`made_with`,
+the whole ``env`` section): the rollouts' shards in their Parquet metadata, the VAE, the LSTM
+and the planning model in their saved dict (``env``), an agent in its ``env_params``. A file
+written before it recorded them is judged by what it holds: its number of humans, or the size
+of the observations it reads, and the area a planning model that knows the room draws goals in.
+
+:func:`check_made_with` is what every loader and every reader of rollouts calls with the
+params: the number of humans (hence the size of the observation) and the size of the room must
+be the params'. Otherwise one line names the file and both sides::
+
+    models/planning/seed-0.pt: trained with 5 humans in a 10.0 m room; the params have 3 humans
+    in a 10.0 m room
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from typing import Any
+
+from socnav_wm.data.schema import FEATURES_PER_HUMAN, GOAL_FEATURES, observation_dim
+from socnav_wm.env.params import EnvParams
+
+__all__ = ["check_made_with", "made_with", "observation_record"]
+
+
+def made_with(env_params: EnvParams) -> dict[str, Any]:
+    """What a file records of the scenarios it was made with: the whole ``env`` section, as
+    plain values."""
+    return env_params.to_dict()
+
+
+def observation_record(obs_dim: int) -> dict[str, Any]:
+    """The record of an older file that tells only the size of its observations: its number
+    of humans where ``obs_dim`` is one the simulator gives (2 + 7 per human), else the size."""
+    humans, rest = divmod(int(obs_dim) - GOAL_FEATURES, FEATURES_PER_HUMAN)
+    return {"num_humans": humans} if rest == 0 and humans >= 0 else {"obs_dim": int(obs_dim)}
+
+
+def _humans(count: int) -> str:
+    return f"{count} human{'' if count == 1 else 's'}"
+
+
+def check_made_with(
+    path: str | os.PathLike[str],
+    made: Mapping[str, Any] | None,
+    env_params: EnvParams | None,
+    *,
+    verb: str = "trained",
+    error: type[ValueError] = ValueError,
+) -> None:
+    """Refuse the file ``path`` when what it records of its scenarios (``made``: its ``env``
+    record, or for an older file what :func:`observation_record` tells, and a planning model's
+    ``spawn_half_size``) differs from ``env_params`` in the number of humans, the size of the
+    observation or the size of the room. Nothing is compared when either side is None, nor
+    what the file does not record.
+
+    Raises:
+        error: ``{path}: {verb} with 5 humans in a 10.0 m room; the params have 3 humans in a
+            10.0 m room``.
+    """
+    if made is None or env_params is None:
+        return
+    humans, obs_dim = made.get("num_humans"), made.get("obs_dim")
+    room, spawn = made.get("room_size"), made.get("spawn_half_size")
+    other_goals = room is None and spawn is not None and spawn != env_params.spawn_half_size
+    differs = (
+        (humans is not None and int(humans) != env_params.num_humans)
+        or (obs_dim is not None and int(obs_dim) != observation_dim(env_params.num_humans))
+        or (room is not None and float(room) != env_params.room_size)
+        or other_goals
+    )
+    if not differs:
+        return
+    ours = _humans(env_params.num_humans)
+    if humans is not None:
+        theirs = _humans(int(humans))
+    elif obs_dim is not None:
+        theirs = f"{int(obs_dim)}-d observations"
+        ours += f" ({observation_dim(env_params.num_humans)}-d observations)"
+    else:
+        theirs = "humans not recorded"
+    ours += f" in a {float(env_params.room_size)} m room"
+    if room is not None:
+        theirs += f" in a {float(room)} m room"
+    elif other_goals:
+        theirs += f", goals drawn within ±{float(spawn)} m"
+        ours += f" (goals drawn within ±{env_params.spawn_half_size} m)"
+    raise error(f"{path}: {verb} with {theirs}; the params have {ours}")
