@@ -12,7 +12,7 @@ from typing import Any
 import torch
 
 from socnav_wm.agents.features import VARIANTS
-from socnav_wm.agents.params import AgentParams, check_variant
+from socnav_wm.agents.params import AgentParams
 from socnav_wm.env.params import EnvParams
 from socnav_wm.io import atomic_path, load_saved
 
@@ -46,8 +46,8 @@ def run_identity(
     The checkpoint format version is part of it too: a checkpoint written by an older version
     of this code has another file name, and a run started by newer code begins afresh.
     """
-    p = params.resolved(variant)
-    world = VARIANTS[check_variant(variant)].needs_world_model
+    p = params.resolved(variant)  # checks the variant's name
+    world = VARIANTS[variant].needs_world_model
     return {
         "checkpoint_format": CHECKPOINT_FORMAT_VERSION,
         "variant": variant,

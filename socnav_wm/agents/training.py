@@ -56,7 +56,7 @@ from socnav_wm.agents.checkpoint import (
 from socnav_wm.agents.features import Variant
 from socnav_wm.agents.learner import DQNLearner
 from socnav_wm.agents.memory import GREEDY_BATCH, training_needs
-from socnav_wm.agents.params import AgentParams, check_variant
+from socnav_wm.agents.params import AgentParams
 from socnav_wm.agents.replay import NStepAccumulator, ReplayBuffer
 from socnav_wm.devices import resolve_device
 from socnav_wm.env.core import Simulator, StepResult
@@ -377,10 +377,9 @@ def train_agent(
         NonFiniteTrainingError: a loss or a weight became NaN or infinite (one line; the
             caller writes no agent).
     """
-    check_variant(variant)
+    p = params.resolved(variant)  # checks the variant's name
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
-    p = params.resolved(variant)
     device = resolve_device(p.device)
     vae, lstm = load_world_model(variant, vae_path, lstm_path, device, env_params)
     identity = run_identity(variant, p, env_params, seed, vae_path, lstm_path)
