@@ -221,11 +221,8 @@ class DQNLearner:
         loss = self.loss(batch)
         self._zero_grad()
         loss.backward()
-        grad = self._flat.grad
-        if self.params.grad_clip > 0:
-            # clip_grad_norm_'s rule on the one gradient tensor: g ← g·min(1, c / (‖g‖ + 1e-6)).
-            norm = torch.linalg.vector_norm(grad)
-            grad.mul_(torch.clamp(self.params.grad_clip / (norm + 1e-6), max=1.0))
+        if self.params.grad_clip > 0:  # the global norm: one gradient tensor holds them all
+            torch.nn.utils.clip_grad_norm_([self._flat], self.params.grad_clip)
         self.optimizer.step()
         with torch.no_grad():
             # θ′ ← polyak·θ′ + (1 − polyak)·θ, every parameter in one call.
