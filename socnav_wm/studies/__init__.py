@@ -16,8 +16,7 @@ The names below are imported lazily, so importing the package (the configuration
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from socnav_wm.exports import lazy_exports
 
 _EXPORTS = {
     "GridValue": "socnav_wm.studies.params",
@@ -48,8 +47,4 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'socnav_wm.studies' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)
