@@ -120,7 +120,7 @@ def test_overrides_of_every_type(tmp_path: Path) -> None:
             "vae.learning_rate=3e-4",
             "vae.device=cpu",
             "env.human_policy=sfm",
-            "env.orca_avoid_robot=true",
+            "env.humans_see_robot=true",
             "env.num_humans=5",
             "collect.episodes=10",
             "lstm.seq_len=4",
@@ -131,7 +131,7 @@ def test_overrides_of_every_type(tmp_path: Path) -> None:
     assert params.vae.learning_rate == pytest.approx(3e-4)
     assert params.vae.device == "cpu"
     assert params.env.human_policy == "sfm"
-    assert params.env.orca_avoid_robot is True
+    assert params.env.humans_see_robot is True
     assert params.env.num_humans == 5
     assert params.collect.episodes == 10
     assert params.lstm.seq_len == 4
@@ -178,7 +178,7 @@ def test_out_of_range_value(tmp_path: Path) -> None:
         ("env:\n  human_policy: bogus\n", "env.human_policy: must be one of mixed, sfm, orca"),
         ("env:\n  room_size: -1\n", "env.room_size: must be > 0"),
         ("env:\n  num_humans: true\n", "env.num_humans: expected an integer, got True"),
-        ("env:\n  orca_avoid_robot: 'no'\n", "env.orca_avoid_robot: expected true or false"),
+        ("env:\n  swept_collision: 'no'\n", "env.swept_collision: expected true or false"),
         ("env: 3\n", "env: expected a mapping of keys, got 3"),
         ("vae: [1, 2]\n", "vae: expected a mapping of keys, got [1, 2]"),
     ],

@@ -29,6 +29,7 @@ import numpy as np
 
 from socnav_wm.agents.baseline_params import OrcaBaselineParams, SfmBaselineParams
 from socnav_wm.env import orca
+from socnav_wm.env.obstacles import nearest_points, obstacle_map, polygon_sizes, polygons
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import BatchState
 
@@ -39,6 +40,7 @@ __all__ = [
     "OrcaBaselineParams",
     "SfmBaseline",
     "SfmBaselineParams",
+    "holonomic_command",
     "make_baseline",
     "unicycle_command",
 ]
@@ -113,8 +115,15 @@ def unicycle_command(
 
 def _robot_velocity(state: BatchState) -> np.ndarray:
     """(N, 2) world-frame robot velocity during the last step, m/s."""
-    heading = np.stack((np.cos(state.robot_theta), np.sin(state.robot_theta)), axis=-1)
-    return state.robot_v[:, None] * heading
+    return state.robot_velocity()
+
+
+def holonomic_command(desired_velocity: np.ndarray, robot_theta: np.ndarray) -> np.ndarray:
+    """World-frame desired velocities (N, 2) as the holonomic robot's commands: the same
+    velocity in its frame, (vx, vy) m/s (the simulator clips the speed)."""
+    c, s = np.cos(robot_theta), np.sin(robot_theta)
+    x, y = desired_velocity[:, 0], desired_velocity[:, 1]
+    return np.stack((c * x + s * y, -s * x + c * y), axis=-1)
 
 
 def _goal_direction(state: BatchState) -> tuple[np.ndarray, np.ndarray]:
@@ -142,7 +151,9 @@ class _VelocityBaseline:
         raise NotImplementedError
 
     def act(self, state: BatchState, params: EnvParams) -> np.ndarray:
-        """(N, 2) commands (v m/s, ω rad/s) for every env."""
+        """(N, 2) commands (v m/s, ω rad/s; holonomic: (vx, vy) m/s) for every env."""
+        if params.kinematics == "holonomic":
+            return holonomic_command(self.desired_velocity(state, params), state.robot_theta)
         return unicycle_command(
             self.desired_velocity(state, params),
             state.robot_theta,
@@ -198,7 +209,7 @@ class OrcaBaseline(_VelocityBaseline):
         radius[:, 1:] = params.human_radius
         max_speed = np.empty((n, h + 1))
         max_speed[:, 0] = params.robot_max_speed
-        max_speed[:, 1:] = params.human_max_speed
+        max_speed[:, 1:] = state.human_max_speed
         compute = np.zeros((n, h + 1), dtype=bool)
         compute[:, 0] = True
         orca_params = orca.OrcaParams(
@@ -208,6 +219,12 @@ class OrcaBaseline(_VelocityBaseline):
             time_horizon_obst=c.time_horizon_obst,
             time_step=params.dt,
         )
+        own = None
+        if obstacle_map(state) is not None:  # the room's tables and plants, as the humans see them
+            own = orca.EnvObstacles.from_polygons(
+                polygons(state.obstacle_kind, state.obstacle_xy, state.obstacle_half),
+                polygon_sizes(state.obstacle_kind),
+            )
         new_velocity = orca.orca_velocities(
             position,
             velocity,
@@ -217,6 +234,7 @@ class OrcaBaseline(_VelocityBaseline):
             compute,
             self._obstacles(params.wall_half_size),
             orca_params,
+            own,
         )
         return new_velocity[:, 0]
 
@@ -268,6 +286,14 @@ class SfmBaseline(_VelocityBaseline):
 
         force[:, 0] += wall(x + half) - wall(half - x)
         force[:, 1] += wall(y + half) - wall(half - y)
+        # Tables and plants: pushed away from the nearest point of each, as from a wall.
+        obstacles = obstacle_map(state)
+        if obstacles is not None:
+            nearest, gap = nearest_points(state.robot_xy, *obstacles)
+            away = state.robot_xy[:, None, :] - nearest
+            length = np.linalg.norm(away, axis=-1, keepdims=True)
+            unit = np.divide(away, length, out=np.zeros_like(away), where=length > 0)
+            force += np.einsum("no,nok->nk", np.where(np.isfinite(gap), wall(gap), 0.0), unit)
         return force
 
     def desired_velocity(self, state: BatchState, params: EnvParams) -> np.ndarray:

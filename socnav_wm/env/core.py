@@ -23,10 +23,28 @@ import numpy as np
 from socnav_wm.env.geometry import norm
 from socnav_wm.env.humans import HumanDynamics
 from socnav_wm.env.observation import observation_size, observe
+from socnav_wm.env.obstacles import disc_clearance
 from socnav_wm.env.params import EnvParams
-from socnav_wm.env.reward import REWARD_CODES, compute_dmin, compute_reward
-from socnav_wm.env.scenario import POLICY_CODES, spawn
-from socnav_wm.env.state import COLLISION_HUMAN, COLLISION_NONE, COLLISION_WALL, BatchState
+from socnav_wm.env.reward import (
+    REWARD_CODES,
+    compute_dmin,
+    compute_reward,
+    point_to_segment_distance,
+)
+from socnav_wm.env.scenario import (
+    FAMILY_CODES,
+    POLICY_CODES,
+    SEES_CODES,
+    spawn,
+    spawn_crossing,
+)
+from socnav_wm.env.state import (
+    COLLISION_HUMAN,
+    COLLISION_NONE,
+    COLLISION_OBSTACLE,
+    COLLISION_WALL,
+    BatchState,
+)
 from socnav_wm.resources import check_fits
 
 ACTION_NAMES = ("stop", "forward", "rotate-left", "rotate-right")
@@ -36,8 +54,11 @@ MAX_SCENARIO_ID = 2**62
 
 
 def discrete_commands(params: EnvParams) -> np.ndarray:
-    """(4, 2) table of (v m/s, ω rad/s) for the paper's actions: stop, forward, left, right."""
+    """(4, 2) table of the paper's actions, stop, forward, left, right: (v m/s, ω rad/s) for the
+    unicycle; for the holonomic robot (vx, vy) m/s in its frame, translations at full speed."""
     v, w = params.robot_max_speed, params.robot_max_rotation
+    if params.kinematics == "holonomic":
+        return np.array([[0.0, 0.0], [v, 0.0], [0.0, v], [0.0, -v]])
     return np.array([[0.0, 0.0], [v, 0.0], [0.0, w], [0.0, -w]])
 
 
@@ -50,6 +71,29 @@ class StepResult:
     terminated: np.ndarray  # (N,) bool: goal reached or collision
     truncated: np.ndarray  # (N,) bool: step limit reached without termination
     info: dict[str, np.ndarray]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _advance_holonomic(
+    active: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    robot_xy: np.ndarray,
+    robot_theta: np.ndarray,
+    robot_v: np.ndarray,
+    robot_vy: np.ndarray,
+    dt: float,
+) -> None:
+    """Holonomic update: move by the robot-frame velocity (vx, vy)·dt; the heading stays."""
+    for e in range(active.shape[0]):
+        if not active[e]:
+            continue
+        c = math.cos(robot_theta[e])
+        s = math.sin(robot_theta[e])
+        robot_xy[e, 0] += (vx[e] * c - vy[e] * s) * dt
+        robot_xy[e, 1] += (vx[e] * s + vy[e] * c) * dt
+        robot_v[e] = vx[e]
+        robot_vy[e] = vy[e]
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -87,6 +131,13 @@ def _outcomes(
     robot_xy: np.ndarray,
     goal_xy: np.ndarray,
     human_xy: np.ndarray,
+    robot_before: np.ndarray,
+    human_before: np.ndarray,
+    swept: bool,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
+    robot_radius: float,
     step_count: np.ndarray,
     success_distance: float,
     contact_distance: float,
@@ -96,7 +147,9 @@ def _outcomes(
     collision: np.ndarray,
     truncated: np.ndarray,
 ) -> None:
-    """Goal, then collision (human before wall), then timeout — the paper's order."""
+    """Goal, then collision (human, obstacle, wall), then timeout — the paper's order. With
+    ``swept``, a human also collides when the two discs touched during the step, each moving
+    in a straight line from its position ``*_before`` the step (CrowdNav's test)."""
     for e in range(active.shape[0]):
         success[e] = False
         collision[e] = COLLISION_NONE
@@ -113,6 +166,20 @@ def _outcomes(
             if norm(human_xy[e, h, 0] - rx, human_xy[e, h, 1] - ry) <= contact_distance:
                 collision[e] = COLLISION_HUMAN
                 break
+            if swept:
+                # The relative motion over the step, from the relative position before it.
+                bx = human_before[e, h, 0] - robot_before[e, 0]
+                by = human_before[e, h, 1] - robot_before[e, 1]
+                ax = human_xy[e, h, 0] - rx
+                ay = human_xy[e, h, 1] - ry
+                if point_to_segment_distance(bx, by, ax, ay) <= contact_distance:
+                    collision[e] = COLLISION_HUMAN
+                    break
+        clearance = disc_clearance(
+            e, rx, ry, robot_radius, obstacle_kind, obstacle_xy, obstacle_half
+        )
+        if collision[e] == COLLISION_NONE and clearance <= 0.0:
+            collision[e] = COLLISION_OBSTACLE
         if collision[e] == COLLISION_NONE and (abs(rx) >= wall_limit or abs(ry) >= wall_limit):
             collision[e] = COLLISION_WALL
         if collision[e] == COLLISION_NONE and step_count[e] >= max_steps:
@@ -136,12 +203,16 @@ class Simulator:
             raise ValueError(f"num_envs: must be >= 1, got {num_envs}")
         self.params = params if params is not None else EnvParams()
         self.num_envs = int(num_envs)
-        self.obs_dim = observation_size(self.params.num_humans)
+        self.obs_dim = observation_size(
+            self.params.num_observed_humans, self.params.observed_obstacles
+        )
         # The state, the observations and a step's temporaries: refuse in one line what the
         # machine cannot hold rather than allocate until MemoryError.
         needed = self.bytes_needed(self.num_envs, self.params)
         check_fits("num_envs", needed, f"{self.num_envs:,} environments")
-        self.state = BatchState.zeros(self.num_envs, self.params.num_humans)
+        self.state = BatchState.zeros(
+            self.num_envs, self.params.num_humans, self.params.max_obstacles
+        )
         self.state.done[:] = True
         self.seed = 0
         self.next_scenario = 0
@@ -157,6 +228,14 @@ class Simulator:
         self._policy_mode = (
             -1 if self.params.human_policy == "mixed" else POLICY_CODES[self.params.human_policy]
         )
+        self._family = FAMILY_CODES[self.params.scenario]
+        self._sees_mode = SEES_CODES[self.params.humans_see_robot]
+        speed_range = self.params.human_speed_range
+        self._speed_range = np.array(speed_range if speed_range is not None else (0.0, 0.0))
+        self._obstacle_counts = np.array((*self.params.tables, *self.params.plants), np.int64)
+        self._table_half = np.array(self.params.table_size) / 2.0
+        self._robot_before = np.zeros((self.num_envs, 2))
+        self._human_before = np.zeros((self.num_envs, self.params.num_humans, 2))
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -218,29 +297,26 @@ class Simulator:
             )
         p = self.params
         s = self.state
-        failures = spawn(
-            envs,
-            self._kernel_seed,
-            ids,
-            self._policy_mode,
-            p.spawn_half_size,
-            p.wall_half_size,
-            p.robot_radius,
-            p.human_radius,
-            p.human_max_speed,
-            p.goal_radius,
-            p.human_goal_radius,
-            p.min_goal_distance,
-            s.robot_xy,
-            s.robot_theta,
-            s.goal_xy,
-            s.human_xy,
-            s.human_heading,
-            s.human_speed,
-            s.human_goal,
-            s.human_goal_index,
-            s.human_policy,
-        )
+        if self._family == 0:
+            failures = spawn(
+                envs, self._kernel_seed, ids, self._policy_mode, p.spawn_half_size,
+                p.wall_half_size, p.robot_radius, p.human_radius, p.human_max_speed,
+                p.goal_radius, p.human_goal_radius, p.min_goal_distance, self._speed_range,
+                self._sees_mode, p.ignore_robot_prob, self._obstacle_counts, self._table_half,
+                p.plant_radius, s.robot_xy, s.robot_theta, s.goal_xy, s.human_xy,
+                s.human_heading, s.human_speed, s.human_goal, s.human_goal_index,
+                s.human_policy, s.human_max_speed, s.human_sees_robot, s.obstacle_kind,
+                s.obstacle_xy, s.obstacle_half,
+            )  # fmt: skip
+        else:
+            failures = spawn_crossing(
+                envs, self._kernel_seed, ids, self._policy_mode, self._family,
+                p.crossing_radius, p.crossing_noise, p.robot_radius, p.human_radius,
+                p.human_max_speed, p.discomfort_distance, self._speed_range, self._sees_mode,
+                p.ignore_robot_prob, s.robot_xy, s.robot_theta, s.goal_xy, s.human_xy,
+                s.human_heading, s.human_speed, s.human_goal, s.human_goal_index,
+                s.human_policy, s.human_max_speed, s.human_sees_robot,
+            )  # fmt: skip
         if failures:
             raise RuntimeError(
                 f"could not place {p.num_humans} humans and the goals in a {p.room_size} m room "
@@ -251,40 +327,58 @@ class Simulator:
         s.start_xy[envs] = s.robot_xy[envs]
         s.robot_v[envs] = 0.0
         s.robot_omega[envs] = 0.0
+        s.robot_vy[envs] = 0.0
         s.step_count[envs] = 0
         s.alive_sum[envs] = 0.0
         s.discomfort_sum[envs] = 0.0
         s.done[envs] = False
+        self._humans.reset_obstacles(s)
         self._observe(envs)
+
+    def restore(self, state: BatchState) -> None:
+        """Take ``state`` as the slots' state (e.g. copies of another simulator's episodes, as
+        the oracle's clones are), with what the dynamics derive from it (the obstacles'
+        polygons)."""
+        self.state = state
+        self._humans.reset_obstacles(state)
 
     @staticmethod
     def bytes_needed(num_envs: int, params: EnvParams) -> int:
         """What ``num_envs`` environments of ``params`` allocate: the state, the observations
         and a step's temporaries (about four copies of the state; measured: 1.0 KiB an
         environment of three humans, against 1.2 estimated)."""
-        one_env = sum(a.nbytes for a in vars(BatchState.zeros(1, params.num_humans)).values())
+        zeros = BatchState.zeros(1, params.num_humans, params.max_obstacles)
+        one_env = sum(a.nbytes for a in vars(zeros).values())
         return 4 * one_env * int(num_envs)
 
     # ------------------------------------------------------------------ step
     def _observe(self, envs: np.ndarray) -> None:
         """Write the observations of environments ``envs`` into the observation buffer."""
         s = self.state
+        p = self.params
         observe(
             s.robot_xy,
             s.robot_theta,
             s.robot_v,
             s.robot_omega,
+            s.robot_vy,
             s.goal_xy,
             s.human_xy,
             s.human_heading,
             s.human_speed,
-            self.params.human_radius,
+            p.human_radius,
+            p.num_observed_humans,
+            s.obstacle_kind,
+            s.obstacle_xy,
+            s.obstacle_half,
+            p.observed_obstacles,
             envs,
             self._obs,
         )
 
     def commands(self, actions: Any) -> tuple[np.ndarray, np.ndarray]:
-        """(v, ω) arrays from discrete actions (N,) or continuous commands (N, 2), clipped."""
+        """(v, ω) arrays (holonomic: (vx, vy)) from discrete actions (N,) or continuous commands
+        (N, 2), clipped."""
         a = np.asarray(actions)
         n = self.num_envs
         if a.ndim == 1 and a.shape[0] == n and np.issubdtype(a.dtype, np.integer):
@@ -297,12 +391,18 @@ class Simulator:
             if not np.all(np.isfinite(a)):
                 raise ValueError("action: continuous commands must be finite")
             p = self.params
+            if p.kinematics == "holonomic":  # (vx, vy): the speed clipped, not each component
+                a = a.astype(np.float64)
+                speed = np.hypot(a[:, 0], a[:, 1])
+                scale = p.robot_max_speed / np.maximum(speed, p.robot_max_speed)
+                return a[:, 0] * scale, a[:, 1] * scale
             v = np.clip(a[:, 0], -p.robot_max_speed, p.robot_max_speed)
             w = np.clip(a[:, 1], -p.robot_max_rotation, p.robot_max_rotation)
             return v.astype(np.float64), w.astype(np.float64)
         raise ValueError(
             f"action: expected {n} integer actions in 0..{NUM_ACTIONS - 1} or an ({n}, 2) float "
-            f"array of (v m/s, omega rad/s), got {a.dtype} array of shape {a.shape}"
+            f"array of (v m/s, omega rad/s) (holonomic: (vx, vy) m/s), got {a.dtype} array of "
+            f"shape {a.shape}"
         )
 
     def step(self, actions: Any) -> StepResult:
@@ -311,7 +411,17 @@ class Simulator:
         p = self.params
         s = self.state
         active = ~s.done
-        _advance_robot(active, v, omega, s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, p.dt)
+        if p.swept_collision:
+            np.copyto(self._robot_before, s.robot_xy)
+            np.copyto(self._human_before, s.human_xy)
+        if p.kinematics == "holonomic":
+            _advance_holonomic(
+                active, v, omega, s.robot_xy, s.robot_theta, s.robot_v, s.robot_vy, p.dt
+            )
+        else:
+            _advance_robot(
+                active, v, omega, s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, p.dt
+            )
         velocity = self._humans.velocities(self._kernel_seed, s)
         self._humans.move(self._kernel_seed, s, velocity, active)
         _outcomes(
@@ -319,6 +429,13 @@ class Simulator:
             s.robot_xy,
             s.goal_xy,
             s.human_xy,
+            self._robot_before,
+            self._human_before,
+            p.swept_collision,
+            s.obstacle_kind,
+            s.obstacle_xy,
+            s.obstacle_half,
+            p.robot_radius,
             s.step_count,
             p.success_distance,
             p.robot_radius + p.human_radius,
@@ -333,6 +450,7 @@ class Simulator:
             s.robot_theta,
             s.robot_v,
             s.robot_omega,
+            s.robot_vy,
             s.human_xy,
             s.human_heading,
             s.human_speed,

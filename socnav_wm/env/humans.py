@@ -15,15 +15,20 @@ import numpy as np
 
 from socnav_wm.env import orca
 from socnav_wm.env.geometry import norm
-from socnav_wm.env.params import EnvParams
+from socnav_wm.env.obstacles import nearest_point, polygon_sizes, polygons, push_out
+from socnav_wm.env.params import PAPER_SFM_SEES_ROBOT, EnvParams
 from socnav_wm.env.scenario import (
+    FAMILY_CODES,
     POLICY_ORCA,
     POLICY_SFM,
+    SEES_ALWAYS,
+    SEES_CODES,
+    SEES_PAPER,
     STREAM_AVOID_ROBOT,
     redraw_human_goal,
     uniform,
 )
-from socnav_wm.env.state import BatchState
+from socnav_wm.env.state import OBSTACLE_NONE, BatchState
 
 # exp(-x) below exp(-40) ≈ 4e-18 is lost next to the desired force (≈ 0.08): skip the call.
 _EXP_CUTOFF = 40.0
@@ -46,11 +51,18 @@ def sfm_velocities(
     human_speed: np.ndarray,
     human_goal: np.ndarray,
     human_policy: np.ndarray,
+    human_max_speed: np.ndarray,
+    human_sees_robot: np.ndarray,
     robot_xy: np.ndarray,
+    robot_velocity: np.ndarray,
+    sees_mode: int,
+    stay_at_goal: bool,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
     wall_half: float,
     human_radius: float,
     robot_radius: float,
-    max_speed: float,
     avoid_robot_prob: float,
     r0: float,
     gamma: float,
@@ -64,10 +76,14 @@ def sfm_velocities(
     """Social-force velocities (N, H, 2) in m/s, written into ``out`` for SFM humans only.
 
     The force is the paper environment's (paper_spec §1): a desired term ``max_speed·e_goal``,
-    exponential repulsion ``exp(−d/r0)·e_o`` from each wall (and from the robot, with
-    probability ``avoid_robot_prob`` per human per step), and the Moussaïd-style interaction
-    force of every other human; each term weighted by ``weight``. Velocity = force/m·dt, m = 1,
-    capped at ``max_speed``.
+    exponential repulsion ``exp(−d/r0)·e_o`` from each wall and each obstacle (from its
+    nearest point), and the Moussaïd-style interaction force of every other human; each term
+    weighted by ``weight``. Velocity = force/m·dt, m = 1, capped at the human's ``max_speed``.
+    The robot (``sees_mode``): ``SEES_PAPER``, it pushes as a wall with probability
+    ``avoid_robot_prob`` per human per step; ``SEES_ALWAYS``, a human that sees it
+    (``human_sees_robot``) feels it as another person moving at ``robot_velocity``. With
+    ``stay_at_goal`` (the crossing families) the desired speed falls to ``dist/1 s`` within a
+    metre of the goal, as CrowdNav's humans slow down there.
     """
     num_envs, num_humans = human_speed.shape
     for e in range(num_envs):
@@ -80,18 +96,32 @@ def sfm_velocities(
             gx = human_goal[e, i, 0] - px
             gy = human_goal[e, i, 1] - py
             gnorm = norm(gx, gy)
+            max_speed = human_max_speed[e, i]
+            desired = min(max_speed, gnorm) if stay_at_goal else max_speed
             fx = 0.0
             fy = 0.0
             if gnorm > 0.0:
-                fx = weight * max_speed * gx / gnorm
-                fy = weight * max_speed * gy / gnorm
+                fx = weight * desired * gx / gnorm
+                fy = weight * desired * gy / gnorm
             # Walls: the nearest point of each wall is on its inner face.
             fx -= weight * _wall_push(wall_half - px - human_radius, r0)
             fx += weight * _wall_push(px + wall_half - human_radius, r0)
             fy -= weight * _wall_push(wall_half - py - human_radius, r0)
             fy += weight * _wall_push(py + wall_half - human_radius, r0)
+            # Obstacles: from the nearest point of each outline.
+            for o in range(obstacle_kind.shape[1]):
+                if obstacle_kind[e, o] == OBSTACLE_NONE:
+                    continue
+                qx, qy, d = nearest_point(
+                    px, py, obstacle_kind[e, o], obstacle_xy[e, o, 0], obstacle_xy[e, o, 1],
+                    obstacle_half[e, o, 0], obstacle_half[e, o, 1],
+                )  # fmt: skip
+                if d > 0.0:
+                    mag = weight * _wall_push(d - human_radius, r0)
+                    fx += mag * (px - qx) / d
+                    fy += mag * (py - qy) / d
             # The robot, seen only now and then, as in the paper's environment.
-            if avoid_robot_prob > 0.0:
+            if sees_mode == SEES_PAPER and avoid_robot_prob > 0.0:
                 coin = uniform(seed, scenario_id[e], STREAM_AVOID_ROBOT, i, step_count[e], 0)
                 if coin < avoid_robot_prob:
                     ox = px - robot_xy[e, 0]
@@ -104,17 +134,29 @@ def sfm_velocities(
             # Other humans.
             vix = human_speed[e, i] * human_heading[e, i, 0]
             viy = human_speed[e, i] * human_heading[e, i, 1]
-            for j in range(num_humans):
+            for j in range(num_humans + 1):
                 if j == i:
                     continue
-                ex = human_xy[e, j, 0] - px
-                ey = human_xy[e, j, 1] - py
+                if j < num_humans:
+                    ox = human_xy[e, j, 0]
+                    oy = human_xy[e, j, 1]
+                    ovx = human_speed[e, j] * human_heading[e, j, 0]
+                    ovy = human_speed[e, j] * human_heading[e, j, 1]
+                elif sees_mode == SEES_ALWAYS and human_sees_robot[e, i]:
+                    ox = robot_xy[e, 0]
+                    oy = robot_xy[e, 1]
+                    ovx = robot_velocity[e, 0]
+                    ovy = robot_velocity[e, 1]
+                else:
+                    continue
+                ex = ox - px
+                ey = oy - py
                 d_ij = norm(ex, ey)
                 if d_ij > 0.0:
                     ex /= d_ij
                     ey /= d_ij
-                dx = lam * (human_speed[e, j] * human_heading[e, j, 0] - vix) + ex
-                dy = lam * (human_speed[e, j] * human_heading[e, j, 1] - viy) + ey
+                dx = lam * (ovx - vix) + ex
+                dy = lam * (ovy - viy) + ey
                 dnorm = norm(dx, dy)
                 b = gamma * dnorm
                 if b == 0.0:
@@ -151,6 +193,10 @@ def move_humans(
     human_goal_index: np.ndarray,
     robot_xy: np.ndarray,
     goal_xy: np.ndarray,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
+    stay_at_goal: bool,
     speed_threshold: float,
     wall_half: float,
     spawn_half: float,
@@ -164,7 +210,9 @@ def move_humans(
 
     As in the paper's environment: speeds below ``speed_threshold`` become 0 and the heading
     follows the velocity (a zero velocity keeps the old heading). Humans are kept inside the
-    walls (a wall is a hard boundary for the dynamics, not just a force). Once all have moved,
+    walls and out of the obstacles (hard boundaries for the dynamics, not just forces; a human
+    pushed out of an obstacle keeps its speed for the step). With ``stay_at_goal`` (the
+    crossing families) goals never change. Otherwise, once all have moved,
     each human (in order) within ``human_radius + human_goal_radius`` of its goal draws its next
     goal, keyed by the goal's index so the draw does not depend on when it happens, and redrawn
     while it touches a wall, the robot (``robot_xy``, its current position), a human, a human
@@ -190,6 +238,10 @@ def move_humans(
             y = human_xy[e, i, 1] + speed * dt * human_heading[e, i, 1]
             human_xy[e, i, 0] = min(limit, max(-limit, x))
             human_xy[e, i, 1] = min(limit, max(-limit, y))
+            if obstacle_kind.shape[1]:
+                push_out(e, i, human_xy, human_radius, obstacle_kind, obstacle_xy, obstacle_half)
+        if stay_at_goal:
+            continue
         for i in range(num_humans):
             x = human_xy[e, i, 0]
             y = human_xy[e, i, 1]
@@ -198,7 +250,8 @@ def move_humans(
                 redraw_human_goal(
                     seed, scenario_id[e], e, i, human_goal_index[e, i], spawn_half,
                     human_goal_radius, wall_half, robot_xy, robot_radius, human_xy, human_radius,
-                    human_goal, goal_xy, robot_goal_radius,
+                    human_goal, goal_xy, robot_goal_radius, obstacle_kind, obstacle_xy,
+                    obstacle_half,
                 )  # fmt: skip
 
 
@@ -216,13 +269,25 @@ class HumanDynamics:
             time_horizon_obst=params.orca_time_horizon_obst,
             time_step=params.dt,
         )
-        agents = h + (1 if params.orca_avoid_robot else 0)
-        self._radius = np.full((num_envs, agents), params.human_radius)
-        self._max_speed = np.full((num_envs, agents), params.human_max_speed)
-        if params.orca_avoid_robot:
-            self._radius[:, h] = params.robot_radius
-            self._max_speed[:, h] = params.robot_max_speed
+        self.sees_mode = SEES_CODES[params.humans_see_robot]
+        self.stay_at_goal = FAMILY_CODES[params.scenario] != 0
+        # ORCA humans who may see the robot: it joins as a last agent that does not reciprocate.
+        self.robot_agent = self.sees_mode == SEES_ALWAYS
+        agents = h + (1 if self.robot_agent else 0)
+        self._radius = np.full((num_envs, agents), params.human_radius + params.orca_safety)
+        if self.robot_agent:
+            self._radius[:, h] = params.robot_radius + params.orca_safety
         self._velocity = np.zeros((num_envs, h, 2))
+        self._env_obstacles: orca.EnvObstacles | None = None
+
+    def reset_obstacles(self, state: BatchState) -> None:
+        """Rebuild the ORCA polygons of every env's tables and plants (after a reset)."""
+        if state.obstacle_kind.shape[1] == 0:
+            return
+        self._env_obstacles = orca.EnvObstacles.from_polygons(
+            polygons(state.obstacle_kind, state.obstacle_xy, state.obstacle_half),
+            polygon_sizes(state.obstacle_kind),
+        )
 
     def velocities(self, seed: int, state: BatchState) -> np.ndarray:
         """(N, H, 2) new velocities of every human (m/s), from the current snapshot."""
@@ -240,12 +305,19 @@ class HumanDynamics:
                 state.human_speed,
                 state.human_goal,
                 policies,
+                state.human_max_speed,
+                state.human_sees_robot,
                 state.robot_xy,
+                state.robot_velocity(),
+                self.sees_mode,
+                self.stay_at_goal,
+                state.obstacle_kind,
+                state.obstacle_xy,
+                state.obstacle_half,
                 p.wall_half_size,
                 p.human_radius,
                 p.robot_radius,
-                p.human_max_speed,
-                p.sfm_avoid_robot_prob,
+                PAPER_SFM_SEES_ROBOT,
                 p.sfm_wall_range,
                 p.sfm_gamma,
                 p.sfm_n,
@@ -259,13 +331,12 @@ class HumanDynamics:
             orca_v = self._orca(state)
             is_orca = (policies == POLICY_ORCA)[..., None]
             np.copyto(velocity, orca_v, where=is_orca)
-        # A human moves speed·dt along its velocity, so this caps every displacement at
-        # human_max_speed·dt. SFM clips its own velocity and ORCA's linear program keeps it in
-        # the same circle; this final clip catches whatever gets past them (a no-op otherwise).
+        # A human moves speed·dt along its velocity, so this caps every displacement at its
+        # max speed·dt. SFM clips its own velocity and ORCA's linear program keeps it in the
+        # same circle; this final clip catches whatever gets past them (a no-op otherwise).
         speed = np.linalg.norm(velocity, axis=-1, keepdims=True)
-        np.multiply(
-            velocity, p.human_max_speed / np.maximum(speed, p.human_max_speed), out=velocity
-        )
+        limit = state.human_max_speed[..., None]
+        np.multiply(velocity, limit / np.maximum(speed, limit), out=velocity)
         return velocity
 
     def _orca(self, state: BatchState) -> np.ndarray:
@@ -275,28 +346,38 @@ class HumanDynamics:
         current = state.human_velocity()
         to_goal = state.human_goal - position
         dist = np.linalg.norm(to_goal, axis=-1, keepdims=True)
-        pref = np.divide(
-            to_goal * p.human_max_speed, dist, out=np.zeros_like(to_goal), where=dist > 0
-        )
+        speed = state.human_max_speed[..., None]
+        if self.stay_at_goal:  # CrowdNav's: the unit direction, the offset itself within 1 m
+            speed = np.minimum(speed, dist)
+        pref = np.divide(to_goal * speed, dist, out=np.zeros_like(to_goal), where=dist > 0)
         compute = state.human_policy == POLICY_ORCA
-        if p.orca_avoid_robot:
-            # The robot joins as an agent that does not reciprocate (compute=False).
-            robot_v = state.robot_v[:, None] * np.stack(
-                (np.cos(state.robot_theta), np.sin(state.robot_theta)), axis=-1
-            )
+        max_speed = state.human_max_speed
+        blind = None
+        if self.robot_agent:
+            # The robot joins as an agent that does not reciprocate (compute=False), unseen by
+            # the humans who ignore it.
+            robot_v = state.robot_velocity()
             position = np.concatenate((position, state.robot_xy[:, None]), axis=1)
             current = np.concatenate((current, robot_v[:, None]), axis=1)
             pref = np.concatenate((pref, robot_v[:, None]), axis=1)
             compute = np.concatenate((compute, np.zeros((state.num_envs, 1), bool)), axis=1)
+            max_speed = np.concatenate(
+                (max_speed, np.full((state.num_envs, 1), p.robot_max_speed)), axis=1
+            )
+            blind = np.concatenate(
+                (~state.human_sees_robot, np.ones((state.num_envs, 1), bool)), axis=1
+            )
         new_v = orca.orca_velocities(
             position,
             current,
             pref,
             self._radius,
-            self._max_speed,
+            max_speed,
             compute,
             self.obstacles,
             self.orca_params,
+            self._env_obstacles,
+            blind,
         )
         return new_v[:, :h]
 
@@ -314,6 +395,10 @@ class HumanDynamics:
             state.human_goal_index,
             state.robot_xy,
             state.goal_xy,
+            state.obstacle_kind,
+            state.obstacle_xy,
+            state.obstacle_half,
+            self.stay_at_goal,
             p.human_speed_threshold,
             p.wall_half_size,
             p.spawn_half_size,

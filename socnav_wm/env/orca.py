@@ -32,6 +32,7 @@ import numpy as np
 
 __all__ = [
     "RVO_EPSILON",
+    "EnvObstacles",
     "Obstacles",
     "OrcaParams",
     "make_obstacles",
@@ -93,6 +94,57 @@ class Obstacles:
     @property
     def num_vertices(self) -> int:
         return int(self.point.shape[0])
+
+
+@dataclass(frozen=True)
+class EnvObstacles:
+    """Each environment's own convex polygons (counter-clockwise), vertices packed per env.
+
+    Attributes:
+        point: (N, V, 2) vertices, metres; only the first ``count[e]`` of env ``e`` are used.
+        next_index: (N, V) the next vertex of the same polygon (an index within the env; −1:
+            an unused vertex).
+        unit_dir: (N, V, 2) unit vector from each vertex to the next.
+        is_convex: (N, V) always True for these polygons.
+        count: (N,) vertices in use per env.
+    """
+
+    point: np.ndarray
+    next_index: np.ndarray
+    unit_dir: np.ndarray
+    is_convex: np.ndarray
+    count: np.ndarray
+
+    @classmethod
+    def empty(cls, num_envs: int) -> EnvObstacles:
+        return cls(
+            point=np.zeros((num_envs, 0, 2)),
+            next_index=np.zeros((num_envs, 0), dtype=np.int64),
+            unit_dir=np.zeros((num_envs, 0, 2)),
+            is_convex=np.zeros((num_envs, 0), dtype=np.bool_),
+            count=np.zeros(num_envs, dtype=np.int64),
+        )
+
+    @classmethod
+    def from_polygons(cls, polygons: np.ndarray, sizes: np.ndarray) -> EnvObstacles:
+        """From (N, P, K, 2) counter-clockwise polygons of which the first ``sizes[n, p]``
+        vertices are used (0: no polygon in that slot). Slot ``p``'s vertices are the env's
+        ``p·K … p·K + K − 1``; unused ones have ``next_index`` −1."""
+        n, p, k, _ = polygons.shape
+        local = np.arange(k)
+        used = local[None, None, :] < sizes[..., None]  # (N, P, K)
+        following = (local[None, None, :] + 1) % np.maximum(sizes[..., None], 1)
+        next_index = np.where(used, np.arange(p)[None, :, None] * k + following, -1)
+        point = polygons.reshape(n, p * k, 2)
+        next_index = next_index.reshape(n, p * k).astype(np.int64)
+        target = np.take_along_axis(point, np.maximum(next_index, 0)[..., None], axis=1)
+        step = target - point
+        length = np.hypot(step[..., 0], step[..., 1])
+        unit = np.divide(step, length[..., None], out=np.zeros_like(step),
+                         where=length[..., None] > 0)  # fmt: skip
+        convex = np.ones((n, p * k), dtype=np.bool_)
+        count = np.full(n, p * k, dtype=np.int64)
+        return cls(np.ascontiguousarray(point), next_index, unit, convex, count)
 
 
 def _left_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
@@ -450,6 +502,12 @@ def _orca_kernel(
     tree_vertex,
     tree_left,
     tree_right,
+    env_point,
+    env_next,
+    env_dir,
+    env_convex,
+    env_count,
+    blind_last,
     neighbor_dist,
     max_neighbors,
     time_horizon,
@@ -458,7 +516,8 @@ def _orca_kernel(
     out,
 ):
     num_envs, num_agents = position.shape[0], position.shape[1]
-    num_vertices = ob_point.shape[0]
+    shared = ob_point.shape[0]
+    num_vertices = shared + env_point.shape[1]
     cap_nb = max(1, min(max_neighbors, num_agents))
     max_lines = num_vertices + cap_nb
 
@@ -468,6 +527,26 @@ def _orca_kernel(
     pld = np.empty((max_lines, 2))
     ob_nb_dist = np.empty(max(1, num_vertices))
     ob_nb_idx = np.empty(max(1, num_vertices), dtype=np.int64)
+    # The shared obstacles (the walls, with their k-d tree) and, after them, each env's own
+    # (tables, plants: convex polygons, searched by brute force): one vertex table per env.
+    all_point = np.empty((max(1, num_vertices), 2))
+    all_next = np.empty(max(1, num_vertices), dtype=np.int64)
+    all_prev = np.empty(max(1, num_vertices), dtype=np.int64)
+    all_dir = np.empty((max(1, num_vertices), 2))
+    all_convex = np.empty(max(1, num_vertices), dtype=np.bool_)
+    for v in range(shared):
+        all_point[v, 0] = ob_point[v, 0]
+        all_point[v, 1] = ob_point[v, 1]
+        all_next[v] = ob_next[v]
+        all_prev[v] = ob_prev[v]
+        all_dir[v, 0] = ob_dir[v, 0]
+        all_dir[v, 1] = ob_dir[v, 1]
+        all_convex[v] = ob_convex[v]
+    ob_point = all_point
+    ob_next = all_next
+    ob_prev = all_prev
+    ob_dir = all_dir
+    ob_convex = all_convex
     st_node = np.empty(tree_vertex.shape[0] + 1, dtype=np.int64)
     st_phase = np.empty(tree_vertex.shape[0] + 1, dtype=np.int64)
     ag_nb_dist = np.empty(cap_nb)
@@ -479,6 +558,18 @@ def _orca_kernel(
     inf = np.inf
 
     for e in range(num_envs):
+        own = env_count[e]
+        for v in range(own):
+            w = shared + v
+            all_point[w, 0] = env_point[e, v, 0]
+            all_point[w, 1] = env_point[e, v, 1]
+            all_next[w] = shared + env_next[e, v] if env_next[e, v] >= 0 else -1
+            all_dir[w, 0] = env_dir[e, v, 0]
+            all_dir[w, 1] = env_dir[e, v, 1]
+            all_convex[w] = env_convex[e, v]
+        for v in range(own):
+            if all_next[shared + v] >= 0:
+                all_prev[all_next[shared + v]] = shared + v
         for a in range(num_agents):
             vx = velocity[e, a, 0]
             vy = velocity[e, a, 1]
@@ -507,12 +598,35 @@ def _orca_kernel(
                 ob_nb_dist,
                 ob_nb_idx,
             )
+            # The env's own edges, as the tree query would take them: facing the agent and
+            # within range, inserted by distance after equal ones.
+            range_ob = obst_range * obst_range
+            for v in range(shared, shared + own):
+                v2 = all_next[v]
+                if v2 < 0:
+                    continue
+                ax = all_point[v, 0]
+                ay = all_point[v, 1]
+                ex = all_point[v2, 0] - ax
+                ey = all_point[v2, 1] - ay
+                left_of = (ax - px) * ey - (ay - py) * ex
+                if left_of < 0.0 and left_of * left_of / (ex * ex + ey * ey) < range_ob:
+                    d = _dist_sq_point_segment(ax, ay, all_point[v2, 0], all_point[v2, 1], px, py)
+                    if d < range_ob:
+                        i = n_ob
+                        n_ob += 1
+                        while i != 0 and d < ob_nb_dist[i - 1]:
+                            ob_nb_dist[i] = ob_nb_dist[i - 1]
+                            ob_nb_idx[i] = ob_nb_idx[i - 1]
+                            i -= 1
+                        ob_nb_dist[i] = d
+                        ob_nb_idx[i] = v
 
             n_ag = 0
             if max_neighbors > 0:
                 range_sq = neighbor_dist * neighbor_dist
                 for b in range(num_agents):
-                    if b == a:
+                    if b == a or (b == num_agents - 1 and blind_last[e, a]):
                         continue
                     d = (px - position[e, b, 0]) ** 2 + (py - position[e, b, 1]) ** 2
                     if d < range_sq:
@@ -799,6 +913,8 @@ def orca_velocities(
     compute: np.ndarray,
     obstacles: Obstacles | None,
     params: OrcaParams = OrcaParams(),  # noqa: B008 (frozen dataclass, safe as a default)
+    env_obstacles: EnvObstacles | None = None,
+    blind_last: np.ndarray | None = None,
 ) -> np.ndarray:
     """New velocities chosen by ORCA for a batch of independent environments.
 
@@ -815,6 +931,10 @@ def orca_velocities(
             still act as neighbours; their output row is their current velocity.
         obstacles: Static obstacles shared by all environments (None: no obstacles).
         params: Neighbour selection and horizons, shared by all agents.
+        env_obstacles: Each environment's own convex obstacles (tables, plants), after the
+            shared ones (None: none).
+        blind_last: (num_envs, num_agents) bool; an agent marked does not see the last agent
+            (a human who ignores the robot). None: every agent sees every other.
 
     Returns:
         (num_envs, num_agents, 2) float64 new velocities, m/s.
@@ -832,6 +952,11 @@ def orca_velocities(
         raise ValueError("velocity and pref_velocity must have the shape of position")
     if obstacles is None:
         obstacles = _NO_OBSTACLES
+    if env_obstacles is None:
+        env_obstacles = EnvObstacles.empty(shape[0])
+    if blind_last is None:
+        blind_last = np.zeros(shape[:2], dtype=np.bool_)
+    blind_last = np.ascontiguousarray(np.broadcast_to(blind_last, shape[:2]), dtype=np.bool_)
     out = np.empty(shape, dtype=np.float64)
     _orca_kernel(
         position,
@@ -848,6 +973,12 @@ def orca_velocities(
         obstacles.tree_vertex,
         obstacles.tree_left,
         obstacles.tree_right,
+        env_obstacles.point,
+        env_obstacles.next_index,
+        env_obstacles.unit_dir,
+        env_obstacles.is_convex,
+        env_obstacles.count,
+        blind_last,
         float(params.neighbor_dist),
         int(params.max_neighbors),
         float(params.time_horizon),

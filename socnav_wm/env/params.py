@@ -8,20 +8,41 @@ one-line error everywhere.
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Literal, Self
+from typing import Annotated, ClassVar, Literal, Self
 
-from pydantic import Field, model_validator
+from pydantic import BeforeValidator, Field, model_validator
 
-from socnav_wm.section import Section, finite, non_negative, positive
+from socnav_wm.section import Section, as_tuple, finite, non_negative, positive
 
-__all__ = ["HUMAN_POLICIES", "REWARD_KINDS", "EnvParams"]
+__all__ = [
+    "FAMILIES",
+    "HUMAN_POLICIES",
+    "KINEMATICS",
+    "PAPER_SFM_SEES_ROBOT",
+    "REWARD_KINDS",
+    "EnvParams",
+]
 
 HumanPolicy = Literal["mixed", "sfm", "orca"]
 RewardKind = Literal["paper", "dense"]
+Family = Literal["room", "circle_crossing", "square_crossing"]
+Kinematics = Literal["unicycle", "holonomic"]
+CountRange = Annotated[tuple[int, int], BeforeValidator(as_tuple)]
+SpeedRange = Annotated[tuple[float, float], BeforeValidator(as_tuple)]
+Size = Annotated[tuple[float, float], BeforeValidator(as_tuple)]
+
+FAMILIES: tuple[str, ...] = ("room", "circle_crossing", "square_crossing")
+KINEMATICS: tuple[str, ...] = ("unicycle", "holonomic")
+PAPER_SFM_SEES_ROBOT = 0.05
+"""``humans_see_robot: paper``: the probability, per SFM human per step, that it is pushed by
+the robot (as by a wall); the paper's ORCA humans never see it."""
 
 PACKING = 1 / 3
 """The share of the humans' square that the discs of the robot, the humans and their goals
 may cover (:attr:`EnvParams.most_humans`)."""
+OBSTACLE_CLEARANCE = 2.0
+"""Obstacles are kept this many human radii apart from each other and from the walls, so that
+no pocket of the room is closed off."""
 GOAL_CROWDING = 2.3
 """How many times the area left to the robot's goal the discs that keep it away may cover."""
 GOAL_AREA_LEFT = 0.005
@@ -67,8 +88,9 @@ class EnvParams(Section):
     """Linear speed of the `forward` action and the clip of continuous commands (m/s)."""
     robot_max_rotation: float = positive(0.387596899)
     """Angular speed of the rotate actions and the clip of continuous commands (rad/s)."""
-    goal_radius: float = positive(0.5)
-    """The goal is reached when the robot centre is within robot_radius + goal_radius."""
+    goal_radius: float = non_negative(0.5)
+    """The goal is reached when the robot centre is within robot_radius + goal_radius (CrowdNav:
+    within robot_radius, goal_radius 0)."""
     min_goal_distance: float = non_negative(0.0)
     """Minimum initial robot-goal distance (m); 0 reproduces the paper's uniform draw."""
     human_radius: float = positive(0.36)
@@ -81,10 +103,56 @@ class EnvParams(Section):
     """Human speeds below this are set to 0, as in the paper's environment."""
     human_policy: HumanPolicy = "mixed"
     """`mixed` draws SFM or ORCA per human per episode (50/50); `sfm` or `orca` for all."""
-    sfm_avoid_robot_prob: float = Field(0.05, ge=0, le=1, allow_inf_nan=False)
-    """Probability, per human per step, that an SFM human treats the robot as an obstacle."""
-    orca_avoid_robot: bool = False
-    """Whether ORCA humans see the robot (as a non-reciprocating agent). The paper: no."""
+    human_speed_range: SpeedRange | None = None
+    """Each human's preferred (and maximum) speed drawn uniformly in [low, high] per episode
+    (m/s); None: every human walks at ``human_max_speed``."""
+    humans_see_robot: bool | Literal["paper"] = "paper"
+    """Whether the humans react to the robot. ``true``: each human sees it for the whole episode
+    unless it drew "ignore" (``ignore_robot_prob``): an ORCA human treats it as an agent that
+    does not reciprocate, an SFM human feels it as another person (the anisotropic interaction
+    force, which steers round it). ``false``: no human sees it (CrowdNav's invisible robot).
+    ``paper``: the paper's environment: SFM humans are pushed by it as by a wall on 5 % of steps
+    (``PAPER_SFM_SEES_ROBOT``), ORCA humans never see it."""
+    ignore_robot_prob: float = Field(0.0, ge=0, le=1, allow_inf_nan=False)
+    """With ``humans_see_robot: true``: the probability that a human ignores the robot for the
+    whole episode (drawn per human at reset; SocNavGym's ``prob_to_avoid_robot`` reversed)."""
+    observed_humans: int | None = Field(None, ge=0)
+    """K, the humans in the observation. None or ``num_humans``: every human, in spawn order
+    (the paper's layout). Fewer: the K nearest, nearest first. More: the slots past
+    ``num_humans`` are padding, flagged by a radius of 0 (a present human's is > 0)."""
+    scenario: Family = "room"
+    """Where people start and go. ``room``: the paper's (uniform in the room, new random goals
+    on arrival). ``circle_crossing`` (CrowdNav): each human starts on a circle of
+    ``crossing_radius`` and walks to the opposite point; the robot goes from (0, −R) to (0, R).
+    ``square_crossing`` (CrowdNav): humans start on one side of a square of side 2R and walk to a
+    point on the other side. In the crossing families a human at its goal stays there."""
+    crossing_radius: float = positive(4.0)
+    """R of the crossing families (m): the circle's radius, the square's half-side."""
+    crossing_noise: float = non_negative(0.5)
+    """Crossing families: each human's start (and so its goal) is moved by up to ± this in x and
+    y (m), CrowdNav's ``px_noise``/``py_noise`` (uniform in ±0.5 × its speed of 1 m/s)."""
+    kinematics: Kinematics = "unicycle"
+    """``unicycle`` (the paper's: turn by ω·dt, then advance v·dt along the heading) or
+    ``holonomic`` (CrowdNav's: a command is a velocity (vx, vy) in the robot's frame, clipped
+    to ``robot_max_speed``; the heading never changes). The four discrete actions are then stop,
+    forward, left and right translations at ``robot_max_speed``."""
+    swept_collision: bool = False
+    """A robot–human contact is also detected between two steps: the closest approach of the
+    two discs moving in a straight line over the step (CrowdNav's test). False: only at the end
+    of each step (the paper's)."""
+    tables: CountRange = (0, 0)
+    """How many tables (axis-aligned rectangles of ``table_size``) each scenario has: a count
+    drawn uniformly in [low, high]."""
+    table_size: Size = (1.2, 0.8)
+    """A table's width (along x) and depth (along y), m."""
+    plants: CountRange = (0, 0)
+    """How many plants (discs of ``plant_radius``) each scenario has, drawn in [low, high]."""
+    plant_radius: float = positive(0.25)
+    """A plant's radius (m)."""
+    observed_obstacles: int = Field(0, ge=0)
+    """M, the obstacles in the observation: the M nearest, nearest first, each as the nearest
+    point of its outline in the robot's frame, its size (the radius of its enclosing circle)
+    and a presence flag (1; slots with no obstacle are all zeros)."""
     reward: RewardKind = "paper"
     """`paper`: paper_spec §3.1 (sparse, refunded on failure); `dense`: per-step penalties."""
     reach_reward: float = finite(1.0)
@@ -104,7 +172,10 @@ class EnvParams(Section):
     orca_time_horizon: float = positive(5.0)
     """ORCA humans: collisions with others are avoided over this horizon (s)."""
     orca_time_horizon_obst: float = positive(5.0)
-    """ORCA humans: collisions with walls are avoided over this horizon (s)."""
+    """ORCA humans: collisions with walls and obstacles are avoided over this horizon (s)."""
+    orca_safety: float = non_negative(0.0)
+    """ORCA humans: added to every agent's radius in their ORCA (m); CrowdNav's humans use
+    0.01 (CrowdNav++'s 0.16)."""
     sfm_wall_range: float = positive(0.05)
     """r0 of the exponential wall/robot repulsion exp(−d/r0) (m)."""
     sfm_gamma: float = positive(0.25)
@@ -119,7 +190,57 @@ class EnvParams(Section):
     """Weight of each of the three SFM force terms (goal, obstacles, other humans)."""
 
     @model_validator(mode="after")
+    def _scenario_parts(self) -> Self:
+        for name in ("tables", "plants"):
+            low, high = getattr(self, name)
+            if not 0 <= low <= high:
+                raise ValueError(
+                    f"{name}: expected [low, high] with 0 <= low <= high, got [{low}, {high}]"
+                )
+        if self.human_speed_range is not None:
+            low, high = self.human_speed_range
+            if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
+                raise ValueError(
+                    f"human_speed_range: expected [low, high] with 0 < low <= high, got "
+                    f"[{low}, {high}]"
+                )
+        if any(not (math.isfinite(v) and v > 0) for v in self.table_size):
+            raise ValueError(
+                f"table_size: expected two positive sizes, got {list(self.table_size)}"
+            )
+        if self.observed_obstacles and not self.max_obstacles:
+            raise ValueError("observed_obstacles: the scenario has no tables or plants to observe")
+        if self.scenario != "room" and self.max_obstacles:
+            raise ValueError(
+                f"tables, plants: obstacles are placed in the room family only, not in "
+                f"{self.scenario}"
+            )
+        if self.ignore_robot_prob and self.humans_see_robot is not True:
+            raise ValueError(
+                "ignore_robot_prob: only with humans_see_robot: true (it is the share of humans "
+                "who do not see a visible robot)"
+            )
+        if self.scenario != "room":
+            reach = self.crossing_radius + self.crossing_noise + self.human_radius
+            if reach >= self.wall_half_size:
+                raise ValueError(
+                    f"crossing_radius: a {self.scenario} of {self.crossing_radius} m (noise "
+                    f"{self.crossing_noise} m) does not fit inside the walls of a "
+                    f"{self.room_size} m room; enlarge room_size"
+                )
+        return self
+
+    @model_validator(mode="after")
     def _fits_in_the_room(self) -> Self:
+        if self.scenario != "room":
+            most = self.most_crossing_humans
+            if self.num_humans > most:
+                raise ValueError(
+                    f"num_humans: {self.num_humans} humans do not fit on a {self.scenario} of "
+                    f"radius {self.crossing_radius} m with radius {self.human_radius} m (at most "
+                    f"{most}; or enlarge crossing_radius)"
+                )
+            return self
         if self.spawn_half_size <= max(self.robot_radius, self.human_radius):
             raise ValueError(
                 f"room_size: a {self.room_size} m room with spawn_margin "
@@ -194,7 +315,7 @@ class EnvParams(Section):
           grown by the goal's radius) cover at most 2.3 times the area left to that goal.
         """
         humans = math.pi * (self.human_radius**2 + self.human_goal_radius**2)
-        room = (2 * self.centre_half_size(self.human_radius)) ** 2
+        room = (2 * self.centre_half_size(self.human_radius)) ** 2 - self.obstacle_area
         packing = (PACKING * room - math.pi * self.robot_radius**2) / humans
         goal = self.goal_radius
         blocking = math.pi * (
@@ -202,6 +323,34 @@ class EnvParams(Section):
         )
         left = self.goal_area_left(self.min_goal_distance) * (2 * self.centre_half_size(goal)) ** 2
         return max(0, math.floor(min(packing, GOAL_CROWDING * left / blocking)))
+
+    @property
+    def max_obstacles(self) -> int:
+        """The most obstacles a scenario can have (the state's obstacle slots)."""
+        return self.tables[1] + self.plants[1]
+
+    @property
+    def num_observed_humans(self) -> int:
+        """K: the human slots of the observation."""
+        return self.num_humans if self.observed_humans is None else self.observed_humans
+
+    @property
+    def obstacle_area(self) -> float:
+        """The area the most obstacles of a scenario cover, each with the clearance kept
+        around it (m²)."""
+        width, depth = self.table_size
+        clear = OBSTACLE_CLEARANCE * self.human_radius
+        table = (width + 2 * clear) * (depth + 2 * clear)
+        plant = math.pi * (self.plant_radius + clear) ** 2
+        return self.tables[1] * table + self.plants[1] * plant
+
+    @property
+    def most_crossing_humans(self) -> int:
+        """Crossing families: the most humans whose starts (and goals) can be spaced on the
+        circle or the square's sides without overlap, at a third of the packing (like rooms)."""
+        gap = 2 * self.human_radius + self.discomfort_distance
+        length = (2 * math.pi if self.scenario == "circle_crossing" else 8) * self.crossing_radius
+        return max(0, math.floor(PACKING * length / gap))
 
     @property
     def wall_half_size(self) -> float:

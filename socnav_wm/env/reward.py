@@ -37,6 +37,7 @@ def compute_dmin(
     robot_theta: np.ndarray,
     robot_v: np.ndarray,
     robot_omega: np.ndarray,
+    robot_vy: np.ndarray,
     human_xy: np.ndarray,
     human_heading: np.ndarray,
     human_speed: np.ndarray,
@@ -56,8 +57,11 @@ def compute_dmin(
     num_envs, num_humans = human_speed.shape
     for e in range(num_envs):
         heading = robot_theta[e] + robot_omega[e] * dt
-        rvx = robot_v[e] * math.cos(heading)
-        rvy = robot_v[e] * math.sin(heading)
+        c = math.cos(heading)
+        s = math.sin(heading)
+        # A holonomic robot's sideways command (robot_vy; 0 for the unicycle) joins in.
+        rvx = robot_v[e] * c - robot_vy[e] * s
+        rvy = robot_v[e] * s + robot_vy[e] * c
         best = math.inf
         for h in range(num_humans):
             px = human_xy[e, h, 0] - robot_xy[e, 0]

@@ -50,6 +50,8 @@ import numba
 import numpy as np
 
 from socnav_wm.env.geometry import norm
+from socnav_wm.env.obstacles import disc_clearance
+from socnav_wm.env.state import OBSTACLE_NONE, OBSTACLE_PLANT, OBSTACLE_TABLE
 
 # Streams: which quantity a draw is for. Changing these values changes every scenario.
 STREAM_ROBOT = 1  # robot position (i = 0, j = attempt) and heading (i = 1)
@@ -58,12 +60,24 @@ STREAM_HUMAN = 3  # human position (i = human, j = attempt), speed, heading
 STREAM_HUMAN_GOAL = 4  # human goal (i = human, j = goal index, k = 2·attempt + coordinate)
 STREAM_HUMAN_POLICY = 5  # SFM or ORCA per human (i = human)
 STREAM_AVOID_ROBOT = 6  # SFM human sees the robot this step (i = human, j = step)
+STREAM_OBSTACLE = 7  # obstacle counts (i = 0, j = kind) and positions (i = slot, j = attempt)
+STREAM_HUMAN_TRAITS = (
+    8  # a human's speed (i = human, j = 0) and whether it ignores the robot (j = 1)
+)
+STREAM_CROSSING = 9  # crossing families: start (i = human, j = attempt) and goal draws
+
+FAMILY_CODES = {"room": 0, "circle_crossing": 1, "square_crossing": 2}
+SEES_PAPER = 0  # humans_see_robot: paper
+SEES_NEVER = 1  # false
+SEES_ALWAYS = 2  # true
+SEES_CODES = {"paper": SEES_PAPER, False: SEES_NEVER, True: SEES_ALWAYS}
 
 POLICY_SFM = 0
 POLICY_ORCA = 1
 POLICY_CODES = {"sfm": POLICY_SFM, "orca": POLICY_ORCA}
 
 MAX_SPAWN_ATTEMPTS = 10_000  # attempts per disc at reset (then the reset is an error)
+OBSTACLE_GAP = 2.0  # obstacles keep this many human radii from each other and from the walls
 MAX_GOAL_ATTEMPTS = 1_000  # attempts per human-goal redraw during an episode (then: keep the goal)
 _KINEMATICS = MAX_SPAWN_ATTEMPTS  # j index of a human's initial speed/heading draws
 
@@ -142,11 +156,16 @@ def human_goal_is_free(
     robot_goal_xy: np.ndarray,
     robot_goal_radius: float,
     with_robot_goal: bool,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
 ) -> bool:
     """Whether a human-goal disc at (gx, gy) of env ``e`` touches nothing (the paper env's
     ``sample_goal``): no wall, not the robot, no human, none of the first ``num_goals`` human
     goals, and, if ``with_robot_goal``, not the robot's goal. Positions are the current ones."""
     if touches_wall(gx, gy, goal_radius, wall_half):
+        return False
+    if disc_clearance(e, gx, gy, goal_radius, obstacle_kind, obstacle_xy, obstacle_half) <= 0.0:
         return False
     if _discs_touch(gx, gy, robot_xy[e, 0], robot_xy[e, 1], goal_radius + robot_radius):
         return False
@@ -160,6 +179,100 @@ def human_goal_is_free(
     return not with_robot_goal or not _discs_touch(
         gx, gy, robot_goal_xy[e, 0], robot_goal_xy[e, 1], robot_goal_gap
     )
+
+
+@numba.njit(cache=True)
+def _count(seed: int, scenario: int, kind: int, low: int, high: int) -> int:
+    """How many obstacles of ``kind`` a scenario has: uniform in [low, high]."""
+    u = uniform(seed, scenario, STREAM_OBSTACLE, 0, kind, 0)
+    return low + min(high - low, int(u * (high - low + 1)))
+
+
+@numba.njit(cache=True, error_model="numpy")
+def spawn_obstacles(
+    e: int,
+    seed: int,
+    s: int,
+    counts: np.ndarray,
+    table_half: np.ndarray,
+    plant_radius: float,
+    wall_half: float,
+    gap: float,
+    kind: np.ndarray,
+    xy: np.ndarray,
+    half: np.ndarray,
+) -> int:
+    """Place scenario ``s``'s tables, then its plants, in slot ``e``: each uniform where it keeps
+    ``gap`` from the walls and (enclosing circles) from the obstacles placed before; ``counts``
+    is [low, high] of tables then of plants. Returns the obstacles that found no place."""
+    failures = 0
+    kind[e, :] = OBSTACLE_NONE
+    slot = 0
+    for which in range(2):
+        code = OBSTACLE_TABLE if which == 0 else OBSTACLE_PLANT
+        hx = table_half[0] if which == 0 else plant_radius
+        hy = table_half[1] if which == 0 else plant_radius
+        reach = math.sqrt(hx * hx + hy * hy) if which == 0 else plant_radius
+        span_x = wall_half - gap - hx
+        span_y = wall_half - gap - hy
+        for _ in range(_count(seed, s, which, counts[2 * which], counts[2 * which + 1])):
+            placed = False
+            for attempt in range(MAX_SPAWN_ATTEMPTS):
+                cx = (2.0 * uniform(seed, s, STREAM_OBSTACLE, slot + 1, attempt, 0) - 1.0) * span_x
+                cy = (2.0 * uniform(seed, s, STREAM_OBSTACLE, slot + 1, attempt, 1) - 1.0) * span_y
+                ok = span_x > 0.0 and span_y > 0.0
+                for other in range(slot):
+                    other_reach = math.sqrt(half[e, other, 0] ** 2 + half[e, other, 1] ** 2)
+                    if kind[e, other] == OBSTACLE_PLANT:
+                        other_reach = half[e, other, 0]
+                    if ok and _discs_touch(cx, cy, xy[e, other, 0], xy[e, other, 1],
+                                           reach + other_reach + gap):  # fmt: skip
+                        ok = False
+                if ok:
+                    placed = True
+                    break
+            if not placed:
+                failures += 1
+                continue
+            kind[e, slot] = code
+            xy[e, slot, 0] = cx
+            xy[e, slot, 1] = cy
+            half[e, slot, 0] = hx
+            half[e, slot, 1] = hy
+            slot += 1
+    return failures
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _human_traits(
+    e: int,
+    seed: int,
+    s: int,
+    h: int,
+    policy_mode: int,
+    max_speed: float,
+    speed_range: np.ndarray,
+    sees_mode: int,
+    ignore_prob: float,
+    human_max_speed: np.ndarray,
+    human_policy: np.ndarray,
+    human_sees_robot: np.ndarray,
+) -> None:
+    """A human's policy, preferred speed and whether it sees the robot this episode."""
+    if policy_mode < 0:
+        coin = uniform(seed, s, STREAM_HUMAN_POLICY, h, 0, 0)
+        human_policy[e, h] = POLICY_ORCA if coin < 0.5 else POLICY_SFM
+    else:
+        human_policy[e, h] = policy_mode
+    if speed_range[1] > 0.0:
+        u = uniform(seed, s, STREAM_HUMAN_TRAITS, h, 0, 0)
+        human_max_speed[e, h] = speed_range[0] + u * (speed_range[1] - speed_range[0])
+    else:
+        human_max_speed[e, h] = max_speed
+    if sees_mode == SEES_ALWAYS:
+        human_sees_robot[e, h] = uniform(seed, s, STREAM_HUMAN_TRAITS, h, 1, 0) >= ignore_prob
+    else:
+        human_sees_robot[e, h] = False
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -176,6 +289,12 @@ def spawn(
     goal_radius: float,
     human_goal_radius: float,
     min_goal_distance: float,
+    speed_range: np.ndarray,
+    sees_mode: int,
+    ignore_prob: float,
+    obstacle_counts: np.ndarray,
+    table_half: np.ndarray,
+    plant_radius: float,
     robot_xy: np.ndarray,
     robot_theta: np.ndarray,
     goal_xy: np.ndarray,
@@ -185,42 +304,73 @@ def spawn(
     human_goal: np.ndarray,
     human_goal_index: np.ndarray,
     human_policy: np.ndarray,
+    human_max_speeds: np.ndarray,
+    human_sees_robot: np.ndarray,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
 ) -> int:
-    """Draw the initial state of scenario ``scenario_ids[n]`` into slot ``envs[n]``.
+    """Draw the initial state of scenario ``scenario_ids[n]`` (the ``room`` family) into slot
+    ``envs[n]``.
 
     The paper environment's ``reset()`` (see the module docstring): positions uniform in
     ``[-half, half]²`` (m), each disc redrawn while it touches a wall (inner faces at
-    ``±wall_half``) or anything placed before it, in the order robot, humans, human goals,
-    robot goal. The robot goal is also kept farther than ``min_goal_distance`` from the robot.
-    ``policy_mode`` is -1 for a 50/50 SFM/ORCA draw per human, else the policy code for all.
-    Returns the number of discs that ran out of attempts (0 unless the room is full).
+    ``±wall_half``), an obstacle or anything placed before it, in the order obstacles, robot,
+    humans, human goals, robot goal. The robot goal is also kept farther than
+    ``min_goal_distance`` from the robot. ``policy_mode`` is -1 for a 50/50 SFM/ORCA draw per
+    human, else the policy code for all; ``speed_range`` [low, high] of the humans' preferred
+    speeds ([0, 0]: all ``human_max_speed``). Returns the number of discs that ran out of
+    attempts (0 unless the room is full).
     """
     num_humans = human_xy.shape[1]
     failures = 0
+    gap = OBSTACLE_GAP * human_radius
     for n in range(envs.shape[0]):
         e = envs[n]
         s = scenario_ids[n]
-        # 1. Robot: off the walls.
+        if obstacle_kind.shape[1]:
+            failures += spawn_obstacles(
+                e, seed, s, obstacle_counts, table_half, plant_radius, wall_half, gap,
+                obstacle_kind, obstacle_xy, obstacle_half,
+            )  # fmt: skip
+        # 1. Robot: off the walls and the obstacles.
         placed = False
         for attempt in range(MAX_SPAWN_ATTEMPTS):
             rx = (2.0 * uniform(seed, s, STREAM_ROBOT, 0, attempt, 0) - 1.0) * half
             ry = (2.0 * uniform(seed, s, STREAM_ROBOT, 0, attempt, 1) - 1.0) * half
             robot_xy[e, 0] = rx
             robot_xy[e, 1] = ry
-            if not touches_wall(rx, ry, robot_radius, wall_half):
+            if (
+                not touches_wall(rx, ry, robot_radius, wall_half)
+                and disc_clearance(
+                    e, rx, ry, robot_radius, obstacle_kind, obstacle_xy, obstacle_half
+                )
+                > 0.0
+            ):
                 placed = True
                 break
         if not placed:
             failures += 1
         robot_theta[e] = (2.0 * uniform(seed, s, STREAM_ROBOT, 1, 0, 0) - 1.0) * math.pi
-        # 2. Humans: off the walls, the robot and the humans placed before.
+        # 2. Humans: off the walls, the obstacles, the robot and the humans placed before.
         for h in range(num_humans):
+            _human_traits(
+                e, seed, s, h, policy_mode, human_max_speed, speed_range, sees_mode, ignore_prob,
+                human_max_speeds, human_policy, human_sees_robot,
+            )  # fmt: skip
             placed = False
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 hx = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 0) - 1.0) * half
                 hy = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 1) - 1.0) * half
                 ok = not touches_wall(hx, hy, human_radius, wall_half) and not _discs_touch(
                     hx, hy, robot_xy[e, 0], robot_xy[e, 1], robot_radius + human_radius
+                )
+                ok = (
+                    ok
+                    and disc_clearance(
+                        e, hx, hy, human_radius, obstacle_kind, obstacle_xy, obstacle_half
+                    )
+                    > 0.0
                 )
                 for other in range(h):
                     if ok and _discs_touch(
@@ -234,23 +384,22 @@ def spawn(
                     break
             if not placed:
                 failures += 1
-            human_speed[e, h] = uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 0) * human_max_speed
+            human_speed[e, h] = (
+                uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 0) * human_max_speeds[e, h]
+            )
             heading = (2.0 * uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 1) - 1.0) * math.pi
             human_heading[e, h, 0] = math.cos(heading)
             human_heading[e, h, 1] = math.sin(heading)
-            if policy_mode < 0:
-                coin = uniform(seed, s, STREAM_HUMAN_POLICY, h, 0, 0)
-                human_policy[e, h] = POLICY_ORCA if coin < 0.5 else POLICY_SFM
-            else:
-                human_policy[e, h] = policy_mode
-        # 3. Human goals: off the walls, the robot, every human and the goals drawn before.
+        # 3. Human goals: off the walls, the obstacles, the robot, every human and the goals
+        # drawn before.
         for h in range(num_humans):
             placed = False
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 gx, gy = draw_human_goal(seed, s, h, 0, attempt, half)
                 if human_goal_is_free(
                     e, gx, gy, human_goal_radius, wall_half, robot_xy, robot_radius, human_xy,
-                    human_radius, human_goal, h, goal_xy, goal_radius, False,
+                    human_radius, human_goal, h, goal_xy, goal_radius, False, obstacle_kind,
+                    obstacle_xy, obstacle_half,
                 ):  # fmt: skip
                     placed = True
                     break
@@ -259,7 +408,7 @@ def spawn(
             human_goal[e, h, 0] = gx
             human_goal[e, h, 1] = gy
             human_goal_index[e, h] = 0
-        # 4. Robot goal: off the walls, the robot, every human and every human goal.
+        # 4. Robot goal: off the walls, the obstacles, the robot, every human and human goal.
         robot_gap = max(min_goal_distance, goal_radius + robot_radius)
         placed = False
         for attempt in range(MAX_SPAWN_ATTEMPTS):
@@ -267,6 +416,13 @@ def spawn(
             gy = (2.0 * uniform(seed, s, STREAM_ROBOT_GOAL, attempt, 0, 1) - 1.0) * half
             ok = not touches_wall(gx, gy, goal_radius, wall_half) and not _discs_touch(
                 gx, gy, robot_xy[e, 0], robot_xy[e, 1], robot_gap
+            )
+            ok = (
+                ok
+                and disc_clearance(
+                    e, gx, gy, goal_radius, obstacle_kind, obstacle_xy, obstacle_half
+                )
+                > 0.0
             )
             human_gap = goal_radius + human_radius
             goal_gap = goal_radius + human_goal_radius
@@ -283,6 +439,110 @@ def spawn(
             failures += 1
         goal_xy[e, 0] = gx
         goal_xy[e, 1] = gy
+    return failures
+
+
+@numba.njit(cache=True, error_model="numpy")
+def spawn_crossing(
+    envs: np.ndarray,
+    seed: int,
+    scenario_ids: np.ndarray,
+    policy_mode: int,
+    family: int,
+    radius: float,
+    noise: float,
+    robot_radius: float,
+    human_radius: float,
+    human_max_speed: float,
+    discomfort: float,
+    speed_range: np.ndarray,
+    sees_mode: int,
+    ignore_prob: float,
+    robot_xy: np.ndarray,
+    robot_theta: np.ndarray,
+    goal_xy: np.ndarray,
+    human_xy: np.ndarray,
+    human_heading: np.ndarray,
+    human_speed: np.ndarray,
+    human_goal: np.ndarray,
+    human_goal_index: np.ndarray,
+    human_policy: np.ndarray,
+    human_max_speeds: np.ndarray,
+    human_sees_robot: np.ndarray,
+) -> int:
+    """CrowdNav's crossing scenarios (``circle_crossing``: family 1, ``square_crossing``: 2).
+
+    The robot starts at (0, −R) facing +y, its goal at (0, R). Each human in turn:
+
+    - circle: at angle U·2π on the circle of radius R, moved by up to ±``noise`` in x and y;
+      its goal is the opposite point (the start mirrored through the centre);
+    - square: on a random side x = ±U·R, y uniform in ±R; its goal on the other side, drawn
+      the same way;
+
+    redrawn while its start is within ``2·human_radius + discomfort`` (robot: its radius
+    instead of one human radius) of the robot's start, an earlier human's start or goal, or
+    (circle) its goal is as close to theirs. Humans start at rest, facing their goal.
+    """
+    num_humans = human_xy.shape[1]
+    failures = 0
+    for n in range(envs.shape[0]):
+        e = envs[n]
+        s = scenario_ids[n]
+        robot_xy[e, 0] = 0.0
+        robot_xy[e, 1] = -radius
+        robot_theta[e] = 0.5 * math.pi
+        goal_xy[e, 0] = 0.0
+        goal_xy[e, 1] = radius
+        for h in range(num_humans):
+            _human_traits(
+                e, seed, s, h, policy_mode, human_max_speed, speed_range, sees_mode, ignore_prob,
+                human_max_speeds, human_policy, human_sees_robot,
+            )  # fmt: skip
+            placed = False
+            px = py = gx = gy = 0.0
+            for attempt in range(MAX_SPAWN_ATTEMPTS):
+                u0 = uniform(seed, s, STREAM_CROSSING, h, attempt, 0)
+                u1 = uniform(seed, s, STREAM_CROSSING, h, attempt, 1)
+                u2 = uniform(seed, s, STREAM_CROSSING, h, attempt, 2)
+                if family == 1:
+                    angle = u0 * 2.0 * math.pi
+                    px = radius * math.cos(angle) + (2.0 * u1 - 1.0) * noise
+                    py = radius * math.sin(angle) + (2.0 * u2 - 1.0) * noise
+                    gx = -px
+                    gy = -py
+                else:
+                    side = 1.0 if u0 > 0.5 else -1.0
+                    px = u1 * radius * side
+                    py = (2.0 * u2 - 1.0) * radius
+                    gx = uniform(seed, s, STREAM_CROSSING, h, attempt, 3) * radius * -side
+                    gy = (2.0 * uniform(seed, s, STREAM_CROSSING, h, attempt, 4) - 1.0) * radius
+                gap = human_radius + robot_radius + discomfort
+                ok = norm(px - robot_xy[e, 0], py - robot_xy[e, 1]) >= gap
+                ok = ok and norm(gx - goal_xy[e, 0], gy - goal_xy[e, 1]) >= gap
+                gap = 2.0 * human_radius + discomfort
+                for other in range(h):
+                    if not ok:
+                        break
+                    ox = human_xy[e, other, 0]
+                    oy = human_xy[e, other, 1]
+                    qx = human_goal[e, other, 0]
+                    qy = human_goal[e, other, 1]
+                    ok = norm(px - ox, py - oy) >= gap and norm(px - qx, py - qy) >= gap
+                    ok = ok and norm(gx - qx, gy - qy) >= gap and norm(gx - ox, gy - oy) >= gap
+                if ok:
+                    placed = True
+                    break
+            if not placed:
+                failures += 1
+            human_xy[e, h, 0] = px
+            human_xy[e, h, 1] = py
+            human_goal[e, h, 0] = gx
+            human_goal[e, h, 1] = gy
+            human_goal_index[e, h] = 0
+            human_speed[e, h] = 0.0
+            d = norm(gx - px, gy - py)
+            human_heading[e, h, 0] = (gx - px) / d if d > 0.0 else 1.0
+            human_heading[e, h, 1] = (gy - py) / d if d > 0.0 else 0.0
     return failures
 
 
@@ -303,6 +563,9 @@ def redraw_human_goal(
     human_goal: np.ndarray,
     robot_goal_xy: np.ndarray,
     robot_goal_radius: float,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
 ) -> bool:
     """Give human ``h`` of env ``e`` its ``goal_index``-th goal during an episode.
 
@@ -318,6 +581,7 @@ def redraw_human_goal(
         if human_goal_is_free(
             e, gx, gy, goal_radius, wall_half, robot_xy, robot_radius, human_xy, human_radius,
             human_goal, human_goal.shape[1], robot_goal_xy, robot_goal_radius, True,
+            obstacle_kind, obstacle_xy, obstacle_half,
         ):  # fmt: skip
             human_goal[e, h, 0] = gx
             human_goal[e, h, 1] = gy

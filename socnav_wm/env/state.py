@@ -17,7 +17,12 @@ import numpy as np
 COLLISION_NONE = 0
 COLLISION_HUMAN = 1
 COLLISION_WALL = 2
-COLLISION_NAMES = ("none", "human", "wall")
+COLLISION_OBSTACLE = 3
+COLLISION_NAMES = ("none", "human", "wall", "obstacle")
+
+OBSTACLE_NONE = 0
+OBSTACLE_TABLE = 1
+OBSTACLE_PLANT = 2
 
 
 @dataclass
@@ -28,6 +33,7 @@ class BatchState:
     robot_theta: np.ndarray  # (N,) rad, in (-pi, pi]
     robot_v: np.ndarray  # (N,) last commanded linear speed, m/s
     robot_omega: np.ndarray  # (N,) last commanded angular speed, rad/s
+    robot_vy: np.ndarray  # (N,) holonomic: last commanded sideways speed (robot frame), m/s
     goal_xy: np.ndarray  # (N, 2) m
     start_xy: np.ndarray  # (N, 2) robot position at reset, m
     human_xy: np.ndarray  # (N, H, 2) m
@@ -36,6 +42,11 @@ class BatchState:
     human_goal: np.ndarray  # (N, H, 2) m
     human_goal_index: np.ndarray  # (N, H) int64: how many goals the human has drawn so far
     human_policy: np.ndarray  # (N, H) int8: scenario.POLICY_SFM or POLICY_ORCA
+    human_max_speed: np.ndarray  # (N, H) each human's preferred (and maximum) speed, m/s
+    human_sees_robot: np.ndarray  # (N, H) bool: the human reacts to the robot this episode
+    obstacle_kind: np.ndarray  # (N, O) int8: OBSTACLE_NONE (empty slot), _TABLE or _PLANT
+    obstacle_xy: np.ndarray  # (N, O, 2) centres, m
+    obstacle_half: np.ndarray  # (N, O, 2) half width and depth of a table; a plant: (r, r), m
     step_count: np.ndarray  # (N,) int64: steps taken in the current episode
     scenario_id: np.ndarray  # (N,) int64: which scenario of the seed runs in each slot
     alive_sum: np.ndarray  # (N,) accumulated alive penalty (paper reward's A)
@@ -43,13 +54,14 @@ class BatchState:
     done: np.ndarray  # (N,) bool: the episode in this slot has ended and awaits a reset
 
     @classmethod
-    def zeros(cls, num_envs: int, num_humans: int) -> BatchState:
-        n, h = num_envs, num_humans
+    def zeros(cls, num_envs: int, num_humans: int, num_obstacles: int = 0) -> BatchState:
+        n, h, o = num_envs, num_humans, num_obstacles
         return cls(
             robot_xy=np.zeros((n, 2)),
             robot_theta=np.zeros(n),
             robot_v=np.zeros(n),
             robot_omega=np.zeros(n),
+            robot_vy=np.zeros(n),
             goal_xy=np.zeros((n, 2)),
             start_xy=np.zeros((n, 2)),
             human_xy=np.zeros((n, h, 2)),
@@ -58,6 +70,11 @@ class BatchState:
             human_goal=np.zeros((n, h, 2)),
             human_goal_index=np.zeros((n, h), dtype=np.int64),
             human_policy=np.zeros((n, h), dtype=np.int8),
+            human_max_speed=np.zeros((n, h)),
+            human_sees_robot=np.zeros((n, h), dtype=bool),
+            obstacle_kind=np.zeros((n, o), dtype=np.int8),
+            obstacle_xy=np.zeros((n, o, 2)),
+            obstacle_half=np.zeros((n, o, 2)),
             step_count=np.zeros(n, dtype=np.int64),
             scenario_id=np.zeros(n, dtype=np.int64),
             alive_sum=np.zeros(n),
@@ -83,6 +100,14 @@ class BatchState:
 
     def copy(self) -> BatchState:
         return BatchState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    def robot_velocity(self) -> np.ndarray:
+        """(N, 2) world-frame robot velocity during the last step, m/s: the last command
+        (forward ``robot_v`` and, holonomic, sideways ``robot_vy``) along the heading."""
+        c, s = np.cos(self.robot_theta), np.sin(self.robot_theta)
+        return np.stack(
+            (self.robot_v * c - self.robot_vy * s, self.robot_v * s + self.robot_vy * c), axis=-1
+        )
 
     def human_velocity(self) -> np.ndarray:
         """(N, H, 2) world-frame human velocities, m/s."""

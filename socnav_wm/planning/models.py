@@ -13,6 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
+from socnav_wm.env.observation import observation_size
 from socnav_wm.env.params import EnvParams
 from socnav_wm.worldmodel.ego import advance, commands_of, human_velocities, positions
 
@@ -49,8 +50,8 @@ class _ConstantVelocityRollout:
         self.points, self.velocity, self.params = points, velocity, params
 
     def step(self, actions: np.ndarray) -> np.ndarray:
-        v, w = commands_of(actions, self.params)
-        self.points, self.velocity = advance(self.points, self.velocity, v, w, self.params.dt)
+        motion = commands_of(actions, self.params)
+        self.points, self.velocity = advance(self.points, self.velocity, motion, self.params.dt)
         return self.points
 
 
@@ -64,18 +65,25 @@ class ConstantVelocityModel:
     """
 
     def __init__(self, params: EnvParams) -> None:
+        if params.num_observed_humans != params.num_humans:
+            raise ValueError(
+                f"env.observed_humans: constant velocity follows each human from one observation "
+                f"to the next, so it needs every human in spawn order (observed_humans "
+                f"{params.num_observed_humans} != num_humans {params.num_humans})"
+            )
         self.params = params
+        self._width = observation_size(params.num_humans)
         self._points = np.zeros((0, 1 + params.num_humans, 2))
         self._velocity = np.zeros_like(self._points)
         self._obs = np.zeros((0, 0))
 
     def reset(self, obs: np.ndarray) -> None:
-        self._obs = np.asarray(obs, dtype=np.float64)
+        self._obs = np.asarray(obs, dtype=np.float64)[:, : self._width]
         self._points = positions(self._obs)
         self._velocity = np.zeros_like(self._points)
 
     def observe(self, obs: np.ndarray, actions: np.ndarray) -> None:
-        obs = np.asarray(obs, dtype=np.float64)
+        obs = np.asarray(obs, dtype=np.float64)[:, : self._width]  # the humans, not obstacles
         self._velocity = human_velocities(self._obs, obs, actions, self.params)
         self._obs, self._points = obs, positions(obs)
 

@@ -16,10 +16,11 @@ At every step, for every episode at once:
    plan is made afresh at the next step.
 
 Walls are not in the observation, so a model that predicts from observations does not see them.
-With ``walls`` (the default) the planner itself knows the room and the robot's pose in it, as a
-robot with a map and localisation does: it moves the imagined robot by the unicycle update of
-each candidate action, and a step that brings it within its radius of a wall is a collision
-(the simulator's test). The models still predict only the goal and the humans.
+With ``walls`` (the default) the planner itself knows the room, its tables and plants, and the
+robot's pose in it, as a robot with a map and localisation does: it moves the imagined robot by
+the update of each candidate action (unicycle or holonomic), and a step that brings it within
+its radius of a wall or an obstacle is a collision (the simulator's test). The models still
+predict only the goal and the humans.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from socnav_wm.env.core import NUM_ACTIONS
+from socnav_wm.env.obstacles import nearest_points, obstacle_map
 from socnav_wm.env.params import EnvParams
 from socnav_wm.planning.models import PlanningModel
 from socnav_wm.planning.params import PlanningParams
@@ -115,11 +117,17 @@ class Planner:
         self.prefixes = prefixes(params.prefix_length)
         self.num_candidates = len(self.prefixes) * len(params.continuations)
 
-    def scores(self, goal_now: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+    def scores(
+        self,
+        goal_now: np.ndarray,
+        pose: np.ndarray | None = None,
+        obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
         """(N, candidates) predicted returns from the model's present, where the goal is at
         ``goal_now`` (N, 2) in the robot frame; candidate ``p · len(continuations) + c`` is
         prefix ``p`` followed by continuation ``c``. With ``pose`` (N, 3: the robot's x, y, θ
-        in the room), touching a wall is a collision."""
+        in the room), touching a wall is a collision, and so is touching one of ``obstacles``
+        (each episode's tables and plants: kinds (N, O), centres (N, O, 2), half sizes)."""
         p, e = self.params, self.env_params
         num_episodes = len(goal_now)
         s = self.num_candidates
@@ -132,6 +140,9 @@ class Planner:
         contact = e.robot_radius + e.human_radius + p.safety_margin
         wall_limit = e.wall_half_size - e.robot_radius - p.safety_margin
         robot = None if pose is None else np.repeat(np.asarray(pose, dtype=np.float64), s, axis=0)
+        if robot is not None and obstacles is not None:
+            obstacles = tuple(np.repeat(a, s, axis=0) for a in obstacles)
+            obstacle_limit = e.robot_radius + p.safety_margin
         for k in range(p.horizon):
             actions = candidate_actions(self.prefixes, p.continuations, k, goal, e)
             predicted = rollout.step(actions)
@@ -140,8 +151,11 @@ class Planner:
             centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
             collided = centre < contact
             if robot is not None:
-                robot = advance_pose(robot, *commands_of(actions, e), e.dt)
+                robot = advance_pose(robot, commands_of(actions, e), e.dt)
                 collided |= np.abs(robot[:, :2]).max(axis=1) >= wall_limit
+                if obstacles is not None:
+                    _, gap = nearest_points(robot[:, :2], *obstacles)
+                    collided |= gap.min(axis=1) <= obstacle_limit
             reached = ~collided & (new_goal_distance < e.success_distance)
             score += np.where(
                 alive,
@@ -153,11 +167,16 @@ class Planner:
             goal_distance = new_goal_distance
         return score.reshape(num_episodes, s)
 
-    def act(self, obs: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+    def act(
+        self,
+        obs: np.ndarray,
+        pose: np.ndarray | None = None,
+        obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
         """The first action (N,) of each episode's best candidate, from the model's present
         (whose observation is ``obs``; ``pose`` (N, 3): the robot's in the room, for the
-        walls)."""
-        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2], pose)
+        walls; ``obstacles``: the room's tables and plants)."""
+        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2], pose, obstacles)
         best = scores.argmax(axis=1)  # the first of equal scores
         return self.prefixes[best // len(self.params.continuations), 0]
 
@@ -175,12 +194,16 @@ class Planner:
         the episodes, every later call is their next step."""
         last: list[np.ndarray] = []
 
-        def act(obs: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+        def act(
+            obs: np.ndarray,
+            pose: np.ndarray | None = None,
+            obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        ) -> np.ndarray:
             if last:
                 self.model.observe(obs, last[0])
             else:
                 self.model.reset(obs)
-            actions = self.act(obs, pose)
+            actions = self.act(obs, pose, obstacles)
             last[:] = [actions]
             return actions
 
@@ -188,6 +211,6 @@ class Planner:
             return act
 
         def localised(sim: Any) -> np.ndarray:
-            return act(sim.observation, sim.state.robot_pose())
+            return act(sim.observation, sim.state.robot_pose(), obstacle_map(sim.state))
 
         return localised

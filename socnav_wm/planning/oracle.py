@@ -42,8 +42,13 @@ def clone_simulator(
     rows = np.arange(sim.num_envs) if envs is None else np.asarray(envs, dtype=np.int64)
     clone = Simulator(len(rows) * repeats, sim.params)
     state = sim.state
-    clone.state = BatchState(
-        **{f.name: np.repeat(getattr(state, f.name)[rows], repeats, axis=0) for f in fields(state)}
+    clone.restore(
+        BatchState(
+            **{
+                f.name: np.repeat(getattr(state, f.name)[rows], repeats, axis=0)
+                for f in fields(state)
+            }  # fmt: skip
+        )
     )
     clone.seed = sim.seed if seed is None else int(seed) % 2**64
     clone.next_scenario = sim.next_scenario

@@ -18,6 +18,8 @@ Positions here are arrays ``(..., 1 + H, 2)``: the goal, then each human, in the
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from socnav_wm.env.core import discrete_commands
@@ -35,33 +37,66 @@ def positions(obs: np.ndarray) -> np.ndarray:
     return np.concatenate([obs[..., None, :2], humans], axis=-2)
 
 
-def commands_of(actions: np.ndarray, params: EnvParams) -> tuple[np.ndarray, np.ndarray]:
-    """(v, ω) of discrete actions (any shape), or of continuous commands (..., 2) clipped to the
-    robot's limits, as the simulator executes them."""
+class Motion(NamedTuple):
+    """What the robot executes in a step: forward speed ``v`` (m/s) and turn rate ``omega``
+    (rad/s); for the holonomic robot also the sideways speed ``vy`` (None: the unicycle)."""
+
+    v: np.ndarray
+    omega: np.ndarray
+    vy: np.ndarray | None = None
+
+
+def commands_of(actions: np.ndarray, params: EnvParams) -> Motion:
+    """The motion of discrete actions (any shape), or of continuous commands (..., 2) clipped
+    to the robot's limits, as the simulator executes them (:meth:`Simulator.commands`)."""
     a = np.asarray(actions)
+    holonomic = params.kinematics == "holonomic"
     if np.issubdtype(a.dtype, np.integer):
         table = discrete_commands(params)
-        return table[a, 0], table[a, 1]
+        if holonomic:
+            return Motion(table[a, 0], np.zeros(a.shape), table[a, 1])
+        return Motion(table[a, 0], table[a, 1])
+    if holonomic:
+        a = a.astype(np.float64)
+        speed = np.hypot(a[..., 0], a[..., 1])
+        scale = params.robot_max_speed / np.maximum(speed, params.robot_max_speed)
+        return Motion(a[..., 0] * scale, np.zeros(a.shape[:-1]), a[..., 1] * scale)
     v = np.clip(a[..., 0], -params.robot_max_speed, params.robot_max_speed)
     w = np.clip(a[..., 1], -params.robot_max_rotation, params.robot_max_rotation)
-    return v.astype(np.float64), w.astype(np.float64)
+    return Motion(v.astype(np.float64), w.astype(np.float64))
 
 
-def ego_step(points: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
+def ego_step(points: np.ndarray, motion: Motion, dt: float) -> np.ndarray:
     """Robot-frame points (..., P, 2) of static world points, seen after the robot executed
-    ``(v, ω)`` (shape ``...``) for ``dt``: ``R(−ω·dt)·p − (v·dt, 0)``."""
-    angle = np.asarray(omega, dtype=np.float64)[..., None] * dt
-    c, s = np.cos(angle), np.sin(angle)
+    ``motion`` (shape ``...``) for ``dt``: ``R(−ω·dt)·p − (v·dt, 0)`` for the unicycle,
+    ``p − (v·dt, vy·dt)`` for the holonomic robot."""
     x, y = points[..., 0], points[..., 1]
-    return np.stack([c * x + s * y - np.asarray(v)[..., None] * dt, -s * x + c * y], axis=-1)
+    if motion.vy is not None:
+        return np.stack(
+            [x - np.asarray(motion.v)[..., None] * dt, y - np.asarray(motion.vy)[..., None] * dt],
+            axis=-1,
+        )
+    angle = np.asarray(motion.omega, dtype=np.float64)[..., None] * dt
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * x + s * y - np.asarray(motion.v)[..., None] * dt, -s * x + c * y], axis=-1)
 
 
-def advance_pose(pose: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
-    """The robot's room pose (N, 3: x, y, θ) after it executes ``(v, ω)`` (N,): a turn by
-    ``ω·dt``, then a step of ``v·dt`` along the new heading (the simulator's unicycle update,
-    without its wrap of θ, which changes no position)."""
-    theta = pose[:, 2] + omega * dt
-    step = v * dt
+def advance_pose(pose: np.ndarray, motion: Motion, dt: float) -> np.ndarray:
+    """The robot's room pose (N, 3: x, y, θ) after it executes ``motion`` (N,): for the
+    unicycle a turn by ``ω·dt``, then a step of ``v·dt`` along the new heading (the simulator's
+    update, without its wrap of θ, which changes no position); for the holonomic robot a step
+    of ``(v, vy)·dt`` in its frame, the heading unchanged."""
+    if motion.vy is not None:
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        return np.column_stack(
+            [
+                pose[:, 0] + (motion.v * c - motion.vy * s) * dt,
+                pose[:, 1] + (motion.v * s + motion.vy * c) * dt,
+                pose[:, 2],
+            ]
+        )
+    theta = pose[:, 2] + motion.omega * dt
+    step = motion.v * dt
     return np.column_stack(
         [pose[:, 0] + step * np.cos(theta), pose[:, 1] + step * np.sin(theta), theta]
     )
@@ -81,20 +116,21 @@ def human_velocities(
     """Per-step velocities (B, 1 + H, 2) in the current robot frame: each human's displacement
     between the two observations after undoing the robot's motion ``previous_action``; zero for
     the goal, which never moves."""
-    v, w = commands_of(previous_action, params)
     current = positions(obs)
     velocity = np.zeros_like(current)
-    seen_from_now = ego_step(positions(previous_obs), v, w, params.dt)
+    seen_from_now = ego_step(
+        positions(previous_obs), commands_of(previous_action, params), params.dt
+    )
     velocity[:, 1:] = current[:, 1:] - seen_from_now[:, 1:]
     return velocity
 
 
 def advance(
-    points: np.ndarray, velocity: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float
+    points: np.ndarray, velocity: np.ndarray, motion: Motion, dt: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """One step of points moving at ``velocity`` (per step, robot frame) while the robot executes
-    ``(v, ω)``: the new robot-frame points and velocities (the world velocity is kept)."""
-    return ego_step(points + velocity, v, omega, dt), rotate_vectors(velocity, omega, dt)
+    ``motion``: the new robot-frame points and velocities (the world velocity is kept)."""
+    return ego_step(points + velocity, motion, dt), rotate_vectors(velocity, motion.omega, dt)
 
 
 def predict_positions(
@@ -117,10 +153,11 @@ def predict_positions(
         velocity = human_velocities(previous_obs, obs, previous_action, params)
     else:
         velocity = np.zeros_like(current)
-    v, w = commands_of(future_actions, params)
+    motion = commands_of(future_actions, params)
     out = np.empty((current.shape[0], future_actions.shape[1], *current.shape[1:]))
     for k in range(future_actions.shape[1]):
         if name != "copy-last":
-            current, velocity = advance(current, velocity, v[:, k], w[:, k], params.dt)
+            step = Motion(*(None if m is None else m[:, k] for m in motion))
+            current, velocity = advance(current, velocity, step, params.dt)
         out[:, k] = current
     return out

@@ -90,7 +90,7 @@ def test_vector_env_matches_the_single_env_for_the_same_scenario() -> None:
         ({"num_humans": 2.5}, "env.num_humans: expected an integer"),
         ({"room_size": 0}, "env.room_size: must be > 0"),
         ({"human_max_speed": "fast"}, "env.human_max_speed: expected a number"),
-        ({"orca_avoid_robot": "yes"}, "env.orca_avoid_robot: expected true or false"),
+        ({"swept_collision": "yes"}, "env.swept_collision: expected true or false"),
         ({"colour": "red"}, "env: unknown option"),
         ({"action_type": "joystick"}, "action_type: must be one of discrete, continuous"),
     ],

@@ -16,7 +16,7 @@ STOP = 0
 
 def _one_human(policy: str, xy, goal, **params) -> Simulator:
     sim = Simulator(
-        1, EnvParams(num_humans=1, human_policy=policy, sfm_avoid_robot_prob=0.0, **params)
+        1, EnvParams(num_humans=1, human_policy=policy, humans_see_robot=False, **params)
     )
     sim.reset(seed=0)
     s = sim.state
@@ -50,7 +50,7 @@ def test_sfm_walls_push_a_human_back_inside() -> None:
 
 
 def test_sfm_humans_facing_each_other_deflect() -> None:
-    sim = Simulator(1, EnvParams(num_humans=2, human_policy="sfm", sfm_avoid_robot_prob=0.0))
+    sim = Simulator(1, EnvParams(num_humans=2, human_policy="sfm", humans_see_robot=False))
     sim.reset(seed=0)
     s = sim.state
     s.robot_xy[0] = (-4.0, -4.0)
@@ -92,6 +92,7 @@ def test_speeds_below_the_threshold_stop_the_human() -> None:
     move_humans(
         0, np.array([0]), np.array([True]), np.array([[[0.0, 0.04]]]), xy, heading, speed, goal,
         np.zeros((1, 1), dtype=np.int64), np.array([[-4.0, -4.0]]), np.array([[4.0, 4.0]]),
+        np.zeros((1, 0), dtype=np.int8), np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), False,
         0.05, 4.8, 4.5, 0.36, 0.3, 0.25, 0.5, 1.0,
     )  # fmt: skip
     assert speed[0, 0] == 0.0

@@ -116,8 +116,9 @@ def test_observation_layout_in_the_robot_frame() -> None:
     s.human_heading[0] = [[-1.0, 0.0], [0.0, 1.0], [1.0, 0.0]]  # headings π, π/2, 0
     out = np.zeros((1, 23), dtype=np.float32)
     observe(
-        s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, s.goal_xy, s.human_xy,
-        s.human_heading, s.human_speed, 0.36, np.array([0]), out,
+        s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, s.robot_vy, s.goal_xy, s.human_xy,
+        s.human_heading, s.human_speed, 0.36, 3, s.obstacle_kind, s.obstacle_xy,
+        s.obstacle_half, 0, np.array([0]), out,
     )  # fmt: skip
     rel_speed = math.sqrt(0.1**2 + 0.14**2)  # human (−0.1, 0) minus robot (0, 0.14)
     expected = [

@@ -274,7 +274,8 @@ def test_a_goal_redraw_that_runs_out_of_attempts_keeps_the_old_goal() -> None:
     # A 100 m robot: every attempt touches it.
     ok = redraw_human_goal(
         0, 0, 0, 0, 1, 4.5, 0.25, 4.8, np.zeros((1, 2)), 100.0, np.array([[[1.0, 1.05]]]), 0.36,
-        goal, np.array([[4.0, 4.0]]), 0.5,
+        goal, np.array([[4.0, 4.0]]), 0.5, np.zeros((1, 0), dtype=np.int8), np.zeros((1, 0, 2)),
+        np.zeros((1, 0, 2)),
     )  # fmt: skip
     assert not ok and MAX_GOAL_ATTEMPTS > 0
     np.testing.assert_array_equal(goal, [[[1.0, 1.0]]])

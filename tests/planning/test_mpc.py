@@ -93,12 +93,15 @@ def test_a_planner_that_knows_the_walls_counts_a_wall_contact_as_a_collision() -
     assert np.all(planner.scores(np.array([[0.0, -2.0]])) == 0.0)
 
 
-def test_the_walls_policy_reads_only_the_observation_and_the_pose() -> None:
+def test_the_walls_policy_reads_only_the_observation_the_pose_and_the_map() -> None:
     far = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]
     half = ENV.wall_half_size - ENV.robot_radius
     # Facing the wall 0.1 m from touching it, the goal straight ahead beyond it: progress says
     # forward, the wall says no.
-    state = SimpleNamespace(robot_pose=lambda: np.array([[half - 0.1, 0.0, 0.0]]))
+    state = SimpleNamespace(
+        robot_pose=lambda: np.array([[half - 0.1, 0.0, 0.0]]),
+        obstacle_kind=np.zeros((1, 0), dtype=np.int8),
+    )
     sim = SimpleNamespace(observation=observation((1.0, 0.0), far), state=state)
     blind = Planner(ConstantVelocityModel(ENV), PlanningParams(walls=False), ENV)
     seeing = Planner(ConstantVelocityModel(ENV), PlanningParams(), ENV)

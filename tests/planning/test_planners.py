@@ -95,8 +95,9 @@ def observation(sim: Simulator) -> np.ndarray:
     s = sim.state
     out = np.zeros((sim.num_envs, sim.obs_dim), dtype=np.float32)
     observe(
-        s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, s.goal_xy, s.human_xy,
-        s.human_heading, s.human_speed, sim.params.human_radius, np.arange(sim.num_envs), out,
+        s.robot_xy, s.robot_theta, s.robot_v, s.robot_omega, s.robot_vy, s.goal_xy, s.human_xy,
+        s.human_heading, s.human_speed, sim.params.human_radius, sim.params.num_humans,
+        s.obstacle_kind, s.obstacle_xy, s.obstacle_half, 0, np.arange(sim.num_envs), out,
     )  # fmt: skip
     return out
 

@@ -27,8 +27,7 @@ def test_the_ego_motion_predicts_static_scenes_to_a_micrometre(action: int) -> N
         before = positions(obs)
         result = sim.step(actions)
         active = result.info["active"] & ~result.terminated
-        v, w = commands_of(actions, STATIC)
-        predicted = ego_step(before, v, w, STATIC.dt)
+        predicted = ego_step(before, commands_of(actions, STATIC), STATIC.dt)
         error = np.abs(predicted - positions(result.obs))[active]
         assert active.any() and error.max() <= 1e-6
         obs = result.obs
@@ -43,7 +42,7 @@ def test_advance_pose_moves_the_robot_as_the_simulator_does() -> None:
         actions = rng.integers(0, 4, size=64)
         result = sim.step(actions)
         active = result.info["active"] & ~result.terminated
-        predicted = advance_pose(pose, *commands_of(actions, STATIC), STATIC.dt)
+        predicted = advance_pose(pose, commands_of(actions, STATIC), STATIC.dt)
         after = sim.state.robot_pose()
         turn = np.angle(np.exp(1j * (predicted[:, 2] - after[:, 2])))  # the simulator wraps θ
         assert active.any()
@@ -51,17 +50,22 @@ def test_advance_pose_moves_the_robot_as_the_simulator_does() -> None:
         assert np.abs(turn[active]).max() <= 1e-12
 
 
-def test_the_ego_motion_is_exact_for_continuous_commands_too() -> None:
-    sim = Simulator(64, STATIC)
+@pytest.mark.parametrize("kinematics", ["unicycle", "holonomic"])
+def test_the_ego_motion_is_exact_for_continuous_commands_too(kinematics: str) -> None:
+    params = STATIC.replace(kinematics=kinematics)
+    sim = Simulator(64, params)
     obs, _ = sim.reset(seed=5)
     rng = np.random.default_rng(0)
     for _ in range(5):
         commands = rng.uniform(-0.3, 0.3, size=(64, 2))  # some beyond the limits: clipped
         before = positions(obs)
+        pose = sim.state.robot_pose()
         result = sim.step(commands)
         active = result.info["active"] & ~result.terminated
-        v, w = commands_of(commands, STATIC)
-        error = np.abs(ego_step(before, v, w, STATIC.dt) - positions(result.obs))[active]
+        motion = commands_of(commands, params)
+        error = np.abs(ego_step(before, motion, params.dt) - positions(result.obs))[active]
+        moved = advance_pose(pose, motion, params.dt)[:, :2] - sim.state.robot_xy
+        assert np.abs(moved[active]).max() <= 1e-12
         assert error.max() <= 1e-6
         obs = result.obs
 
