@@ -395,6 +395,9 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "study_horizon": ("env", "eval", "agent", "studies.horizon"),
     "study_seeds": ("env", "eval", "agent", "studies.seeds"),
     "study_sort_humans": ("env", "eval", "agent", "studies.sort_humans"),
+    "scenario_robots": ("env", "eval", "baselines"),
+    "scenario_planners": ("env", "eval", "planning"),
+    "scenarios_report": (),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
 name is one key of a section). ``evaluate_baseline`` reads ``baselines.<its baseline>`` only:

@@ -35,6 +35,8 @@ class Layout:
     """Agents' training logs: ``{variant}/seed-{seed}.parquet``."""
     eval_dir: Path = Path("data/eval")
     """Evaluation episodes: ``{method}.parquet`` and ``{method}-trajectories.parquet``."""
+    scenario_episodes: Path = Path("data/scenarios")
+    """Each scenario preset's evaluation episodes: ``{preset}/{method}.parquet``."""
     study_runs: Path = Path("data/studies")
     """Every study run's files and checkpoints: ``{study}/...``."""
 
@@ -60,6 +62,8 @@ class Layout:
     """Planning world models' metrics: ``seed-{seed}.json``."""
     eval_metrics_dir: Path = Path("metrics/eval")
     """Evaluation metrics: ``{method}.json``."""
+    scenario_metrics: Path = Path("metrics/scenarios")
+    """Each scenario preset's evaluation metrics: ``{preset}/{method}.json``; ``summary.json``."""
     report_metrics: Path = Path("metrics/report.json")
     prediction_metrics: Path = Path("metrics/prediction.json")
 
@@ -67,6 +71,12 @@ class Layout:
     reports: Path = Path("reports")
     report_claims: Path = Path("reports/claims.json")
     prediction_figure: Path = Path("reports/prediction.png")
+    scenario_presets: Path = Path("configs/scenarios")
+    """The scenario presets: one overlay ``{preset}.yaml`` each (docs/scenarios.md)."""
+    scenarios_report: Path = Path("reports/scenarios.md")
+    """The per-preset table of the non-learning methods (stage ``scenarios_report``)."""
+    scenarios_documents: tuple[Path, ...] = (Path("docs/scenarios.md"),)
+    """The markdown files whose ``scenarios`` block the scenarios report fills."""
     study_reports: Path = Path("reports/studies")
     """Each study's report: ``{study}/claims.json``, ``results.parquet``, ``summary.md``."""
     results_documents: tuple[Path, ...] = (Path("README.md"), Path("docs/evaluation.md"))

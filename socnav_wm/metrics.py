@@ -51,9 +51,11 @@ __all__ = [
     "surface_distances",
     "time_to_reach_goal",
     "wall_collision",
+    "obstacle_collision",
+    "group_crossings",
 ]
 
-_COLLISION_KINDS = (None, "human", "wall")
+_COLLISION_KINDS = (None, "human", "wall", "obstacle")
 
 
 @dataclass(frozen=True)
@@ -68,7 +70,8 @@ class Trajectory:
             distance predicted over the step, m.
         rewards: ``(T,)`` the reward of each step.
         success: the robot reached its goal.
-        collision: ``"human"``, ``"wall"`` or ``None`` (the episode's terminal collision, if any).
+        collision: ``"human"``, ``"wall"``, ``"obstacle"`` or ``None`` (the episode's terminal
+            collision, if any).
         truncated: the episode hit the step limit.
 
     The arrays are validated and stored as read-only ``float64`` copies on construction, so a
@@ -84,6 +87,8 @@ class Trajectory:
     success: bool
     collision: str | None
     truncated: bool
+    human_group: np.ndarray | None = None
+    """``(H,)`` the group of each human (−1: alone); None: no groups recorded."""
 
     def __post_init__(self) -> None:
         robot = _as_float_array("robot_xy", self.robot_xy)
@@ -138,6 +143,14 @@ class Trajectory:
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "success", bool(self.success))
         object.__setattr__(self, "truncated", bool(self.truncated))
+        if self.human_group is not None:
+            groups = np.array(self.human_group, dtype=np.int64)
+            if groups.shape != (humans.shape[1],):
+                raise ValueError(
+                    f"human_group must have shape (H,) = ({humans.shape[1]},), got {groups.shape}"
+                )
+            groups.flags.writeable = False
+            object.__setattr__(self, "human_group", groups)
 
     @property
     def num_steps(self) -> int:
@@ -299,6 +312,43 @@ def wall_collision(traj: Trajectory, params: MetricParams = DEFAULT_PARAMS) -> f
     return 1.0 if traj.collision == "wall" else 0.0
 
 
+def obstacle_collision(traj: Trajectory, params: MetricParams = DEFAULT_PARAMS) -> float:
+    """1 if the episode ended in a collision with a table or a plant, else 0."""
+    return 1.0 if traj.collision == "obstacle" else 0.0
+
+
+GROUP_SPAN = 2.0
+"""Two members of a group at most this far apart (m) bound the group's space between them."""
+
+
+def _crosses(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether segments p→q and a→b (arrays of 2-d points, (T, 2)) properly intersect."""
+
+    def side(o: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return (u[:, 0] - o[:, 0]) * (v[:, 1] - o[:, 1]) - (u[:, 1] - o[:, 1]) * (v[:, 0] - o[:, 0])
+
+    return (side(p, q, a) * side(p, q, b) < 0) & (side(a, b, p) * side(a, b, q) < 0)
+
+
+def group_crossings(traj: Trajectory, params: MetricParams = DEFAULT_PARAMS) -> float:
+    """Steps in which the robot passed through a group: its step crossed the line between two
+    members of one group (walking or standing) at most :data:`GROUP_SPAN` apart, at the
+    step's end. 0 without groups."""
+    groups = traj.human_group
+    if groups is None or not np.any(groups >= 0):
+        return 0.0
+    start, end = traj.robot_xy[:-1], traj.robot_xy[1:]
+    crossed = np.zeros(start.shape[0], dtype=bool)
+    for group in np.unique(groups[groups >= 0]):
+        members = np.flatnonzero(groups == group)
+        for k, i in enumerate(members):
+            for j in members[k + 1 :]:
+                a, b = traj.human_xy[1:, i], traj.human_xy[1:, j]
+                close = np.linalg.norm(a - b, axis=-1) <= GROUP_SPAN
+                crossed |= close & _crosses(start, end, a, b)
+    return float(crossed.sum())
+
+
 def minimum_distance_to_human(traj: Trajectory, params: MetricParams = DEFAULT_PARAMS) -> float:
     """Smallest robot-human surface-to-surface distance over ``t = 0..T`` and all humans (m).
 
@@ -375,6 +425,8 @@ PAPER_METRICS: tuple[str, ...] = (
 
 EXTRA_METRICS: tuple[str, ...] = (
     "wall_collision",
+    "obstacle_collision",
+    "group_crossings",
     "minimum_distance_to_human",
     "time_to_reach_goal",
     "path_length",
@@ -396,6 +448,8 @@ METRIC_FUNCTIONS: dict[str, Callable[[Trajectory, MetricParams], float]] = {
     "idle_time": idle_time,
     "personal_space_compliance": personal_space_compliance,
     "wall_collision": wall_collision,
+    "obstacle_collision": obstacle_collision,
+    "group_crossings": group_crossings,
     "minimum_distance_to_human": minimum_distance_to_human,
     "time_to_reach_goal": time_to_reach_goal,
     "path_length": path_length,
@@ -417,6 +471,8 @@ METRIC_DIRECTIONS: dict[str, str] = {
     "idle_time": "min",
     "personal_space_compliance": "max",
     "wall_collision": "min",
+    "obstacle_collision": "min",
+    "group_crossings": "min",
     "minimum_distance_to_human": "max",
     "time_to_reach_goal": "min",
     "path_length": "min",
@@ -435,6 +491,8 @@ METRIC_UNITS: dict[str, str] = {
     "idle_time": "s",
     "personal_space_compliance": "fraction",
     "wall_collision": "0/1",
+    "obstacle_collision": "0/1",
+    "group_crossings": "steps",
     "minimum_distance_to_human": "m",
     "time_to_reach_goal": "s",
     "path_length": "m",

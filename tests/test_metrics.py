@@ -264,7 +264,7 @@ def test_metric_name_tuples():
         "idle_time",
         "personal_space_compliance",
     )
-    assert len(m.EXTRA_METRICS) == 6
+    assert len(m.EXTRA_METRICS) == 8
     assert not set(m.PAPER_METRICS) & set(m.EXTRA_METRICS)
 
 
@@ -356,3 +356,24 @@ def test_metric_ranges(robot, success):
         assert 0.0 <= out[name] <= 1.0
     # The paper's 0.5 m surface clearance (1.16 m centre) is laxer than the code's 2.02 m centre.
     assert out["personal_space_compliance"] >= out["personal_space_compliance_code"]
+
+
+def test_group_crossings_count_the_steps_through_a_group_and_not_around_it():
+    # Two members of group 0 at (0, ±0.5) (1 m apart), a lone human at (0, 3) and (0, 2.5).
+    humans = np.array([[[0.0, 0.5], [0.0, -0.5], [0.0, 3.0]]] * 3)
+    through = np.array([[-1.0, 0.0], [1.0, 0.0], [2.0, 0.0]])  # between the members
+    around = np.array([[-1.0, 1.5], [1.0, 1.5], [2.0, 1.5]])  # between a member and the loner
+
+    def trajectory(robot, groups):
+        return m.Trajectory(
+            robot_xy=robot, human_xy=humans, goal_xy=np.array([5.0, 0.0]), dmin=np.ones(2),
+            rewards=np.zeros(2), success=False, collision=None, truncated=True,
+            human_group=groups,
+        )  # fmt: skip
+
+    assert m.group_crossings(trajectory(through, np.array([0, 0, -1]))) == 1.0
+    assert m.group_crossings(trajectory(around, np.array([0, 0, -1]))) == 0.0
+    assert m.group_crossings(trajectory(through, np.array([-1, -1, -1]))) == 0.0
+    assert m.group_crossings(trajectory(through, None)) == 0.0
+    with pytest.raises(ValueError, match="human_group must have shape"):
+        trajectory(through, np.array([0, 0]))

@@ -28,6 +28,7 @@ from socnav_wm.layout import LAYOUT
 
 AgentsDir = path_option("Agents folder: reads {variant}/seed-{seed}.pt.")
 ResultsDocuments = documents_option("results")
+ScenariosDocuments = documents_option("scenarios")
 
 
 def run_stage(module: str, options: SharedOptions, **arguments: Any) -> None:
@@ -205,6 +206,42 @@ def report(
         "report", options,
         eval_dir=eval_dir, training_dir=training_dir, out_dir=out_dir, metrics=metrics,
         documents=documents, prediction=LAYOUT.prediction_metrics,
+    )  # fmt: skip
+
+
+@command("scenarios-report")
+@shared_options("params", "no-tracking")
+def scenarios_report(
+    options: SharedOptions,
+    presets_dir: Annotated[
+        Path, typer.Option(help="The presets: one overlay {preset}.yaml each.")
+    ] = LAYOUT.scenario_presets,
+    metrics_dir: Annotated[
+        Path, typer.Option(help="Reads {preset}/{method}.json.")
+    ] = LAYOUT.scenario_metrics,
+    episodes_dir: Annotated[
+        Path, typer.Option(help="Reads {preset}/{method}.parquet (the paired gaps).")
+    ] = LAYOUT.scenario_episodes,
+    out: Annotated[Path, typer.Option(help="The table (markdown).")] = LAYOUT.scenarios_report,
+    summary: Annotated[Path, typer.Option(help="The table (JSON).")] = (
+        LAYOUT.scenario_metrics / "summary.json"
+    ),
+    document: ScenariosDocuments = None,
+) -> None:
+    """Every non-learning method in every scenario preset: success and collisions with their
+    intervals, `oracle-mpc` − `cv-mpc` paired, CrowdNav's published rows side by side (stage
+    `scenarios_report` of scenarios/dvc.yaml); the table also goes into the scenarios block of
+    docs/scenarios.md, or of the --document files (none when --metrics-dir is another)."""
+    if document is not None:
+        documents = tuple(document)
+    elif metrics_dir != LAYOUT.scenario_metrics:
+        documents = ()  # the docs' table is the pipeline's, not another set's
+    else:
+        documents = tuple(p for p in LAYOUT.scenarios_documents if p.is_file())
+    run_stage(
+        "scenarios_report", options,
+        presets_dir=presets_dir, metrics_dir=metrics_dir, episodes_dir=episodes_dir, out=out,
+        summary=summary, documents=documents,
     )  # fmt: skip
 
 

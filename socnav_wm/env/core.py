@@ -211,7 +211,10 @@ class Simulator:
         needed = self.bytes_needed(self.num_envs, self.params)
         check_fits("num_envs", needed, f"{self.num_envs:,} environments")
         self.state = BatchState.zeros(
-            self.num_envs, self.params.num_humans, self.params.max_obstacles
+            self.num_envs,
+            self.params.num_humans,
+            self.params.max_obstacles,
+            self.params.max_groups,
         )
         self.state.done[:] = True
         self.seed = 0
@@ -234,6 +237,8 @@ class Simulator:
         self._speed_range = np.array(speed_range if speed_range is not None else (0.0, 0.0))
         self._obstacle_counts = np.array((*self.params.tables, *self.params.plants), np.int64)
         self._table_half = np.array(self.params.table_size) / 2.0
+        self._group_counts = np.array((*self.params.groups, *self.params.standing_groups), np.int64)
+        self._group_sizes = np.array(self.params.group_size, np.int64)
         self._robot_before = np.zeros((self.num_envs, 2))
         self._human_before = np.zeros((self.num_envs, self.params.num_humans, 2))
 
@@ -303,10 +308,11 @@ class Simulator:
                 p.wall_half_size, p.robot_radius, p.human_radius, p.human_max_speed,
                 p.goal_radius, p.human_goal_radius, p.min_goal_distance, self._speed_range,
                 self._sees_mode, p.ignore_robot_prob, self._obstacle_counts, self._table_half,
-                p.plant_radius, s.robot_xy, s.robot_theta, s.goal_xy, s.human_xy,
-                s.human_heading, s.human_speed, s.human_goal, s.human_goal_index,
-                s.human_policy, s.human_max_speed, s.human_sees_robot, s.obstacle_kind,
-                s.obstacle_xy, s.obstacle_half,
+                p.plant_radius, self._group_counts, self._group_sizes, s.robot_xy,
+                s.robot_theta, s.goal_xy, s.human_xy, s.human_heading, s.human_speed,
+                s.human_goal, s.human_goal_index, s.human_policy, s.human_max_speed,
+                s.human_sees_robot, s.obstacle_kind, s.obstacle_xy, s.obstacle_half,
+                s.human_group, s.group_leader, s.group_standing,
             )  # fmt: skip
         else:
             failures = spawn_crossing(
@@ -347,7 +353,7 @@ class Simulator:
         """What ``num_envs`` environments of ``params`` allocate: the state, the observations
         and a step's temporaries (about four copies of the state; measured: 1.0 KiB an
         environment of three humans, against 1.2 estimated)."""
-        zeros = BatchState.zeros(1, params.num_humans, params.max_obstacles)
+        zeros = BatchState.zeros(1, params.num_humans, params.max_obstacles, params.max_groups)
         one_env = sum(a.nbytes for a in vars(zeros).values())
         return 4 * one_env * int(num_envs)
 

@@ -24,11 +24,13 @@ class Episode:
     rewards: np.ndarray  # (T,)
     dmin: np.ndarray  # (T,) m
     success: bool
-    collision: str | None  # "human", "wall" or None
+    collision: str | None  # "human", "wall", "obstacle" or None
     truncated: bool
     commands: np.ndarray | None = None
     """(T, 2) the (v m/s, ω rad/s) the robot executed at each step (discrete actions looked
     up, continuous commands clipped to the robot's limits); None when not recorded."""
+    human_group: np.ndarray | None = None
+    """(H,) each human's group (−1: alone); None when not recorded."""
 
     @property
     def num_steps(self) -> int:

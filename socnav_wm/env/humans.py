@@ -42,6 +42,45 @@ def _wall_push(gap: float, r0: float) -> float:
 
 
 @numba.njit(cache=True, error_model="numpy")
+def group_pull(
+    human_xy: np.ndarray,
+    human_group: np.ndarray,
+    group_leader: np.ndarray,
+    group_standing: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """(N, H, 2) unit vectors drawing each walking-group member back to its group's centre
+    when farther than (n − 1)/2 m from it (Moussaïd et al. 2010's cohesion threshold for a
+    group of n); zero otherwise and for everyone else."""
+    num_envs, num_humans = human_group.shape
+    out[:] = 0.0
+    for e in range(num_envs):
+        for g in range(group_leader.shape[1]):
+            if group_leader[e, g] < 0 or group_standing[e, g]:
+                continue
+            cx = 0.0
+            cy = 0.0
+            n = 0
+            for h in range(num_humans):
+                if human_group[e, h] == g:
+                    cx += human_xy[e, h, 0]
+                    cy += human_xy[e, h, 1]
+                    n += 1
+            cx /= n
+            cy /= n
+            threshold = 0.5 * (n - 1)
+            for h in range(num_humans):
+                if human_group[e, h] != g:
+                    continue
+                dx = cx - human_xy[e, h, 0]
+                dy = cy - human_xy[e, h, 1]
+                d = norm(dx, dy)
+                if d > threshold:
+                    out[e, h, 0] = dx / d
+                    out[e, h, 1] = dy / d
+
+
+@numba.njit(cache=True, error_model="numpy")
 def sfm_velocities(
     seed: int,
     scenario_id: np.ndarray,
@@ -60,6 +99,9 @@ def sfm_velocities(
     obstacle_kind: np.ndarray,
     obstacle_xy: np.ndarray,
     obstacle_half: np.ndarray,
+    still: np.ndarray,
+    pull: np.ndarray,
+    grouped: bool,
     wall_half: float,
     human_radius: float,
     robot_radius: float,
@@ -83,12 +125,18 @@ def sfm_velocities(
     ``avoid_robot_prob`` per human per step; ``SEES_ALWAYS``, a human that sees it
     (``human_sees_robot``) feels it as another person moving at ``robot_velocity``. With
     ``stay_at_goal`` (the crossing families) the desired speed falls to ``dist/1 s`` within a
-    metre of the goal, as CrowdNav's humans slow down there.
+    metre of the goal, as CrowdNav's humans slow down there. With ``grouped``, a walking-group
+    member adds ``max_speed·pull`` (:func:`group_pull`), and a ``still`` human (a standing
+    group's) does not move.
     """
     num_envs, num_humans = human_speed.shape
     for e in range(num_envs):
         for i in range(num_humans):
             if human_policy[e, i] != POLICY_SFM:
+                continue
+            if grouped and still[e, i]:
+                out[e, i, 0] = 0.0
+                out[e, i, 1] = 0.0
                 continue
             px = human_xy[e, i, 0]
             py = human_xy[e, i, 1]
@@ -103,6 +151,9 @@ def sfm_velocities(
             if gnorm > 0.0:
                 fx = weight * desired * gx / gnorm
                 fy = weight * desired * gy / gnorm
+            if grouped:
+                fx += weight * max_speed * pull[e, i, 0]
+                fy += weight * max_speed * pull[e, i, 1]
             # Walls: the nearest point of each wall is on its inner face.
             fx -= weight * _wall_push(wall_half - px - human_radius, r0)
             fx += weight * _wall_push(px + wall_half - human_radius, r0)
@@ -196,6 +247,9 @@ def move_humans(
     obstacle_kind: np.ndarray,
     obstacle_xy: np.ndarray,
     obstacle_half: np.ndarray,
+    human_group: np.ndarray,
+    group_leader: np.ndarray,
+    group_standing: np.ndarray,
     stay_at_goal: bool,
     speed_threshold: float,
     wall_half: float,
@@ -212,7 +266,9 @@ def move_humans(
     follows the velocity (a zero velocity keeps the old heading). Humans are kept inside the
     walls and out of the obstacles (hard boundaries for the dynamics, not just forces; a human
     pushed out of an obstacle keeps its speed for the step). With ``stay_at_goal`` (the
-    crossing families) goals never change. Otherwise, once all have moved,
+    crossing families) goals never change. A standing group's members never move; a walking
+    group's leader draws the group's next goal, which its members then share. Otherwise, once
+    all have moved,
     each human (in order) within ``human_radius + human_goal_radius`` of its goal draws its next
     goal, keyed by the goal's index so the draw does not depend on when it happens, and redrawn
     while it touches a wall, the robot (``robot_xy``, its current position), a human, a human
@@ -225,6 +281,10 @@ def move_humans(
         if not active[e]:
             continue
         for i in range(num_humans):
+            group = human_group[e, i]
+            if group >= 0 and group_standing[e, group]:
+                human_speed[e, i] = 0.0
+                continue
             vx = velocity[e, i, 0]
             vy = velocity[e, i, 1]
             speed = norm(vx, vy)
@@ -243,6 +303,9 @@ def move_humans(
         if stay_at_goal:
             continue
         for i in range(num_humans):
+            group = human_group[e, i]
+            if group >= 0 and (group_standing[e, group] or group_leader[e, group] != i):
+                continue  # a standing member, or a member who follows its leader's goal
             x = human_xy[e, i, 0]
             y = human_xy[e, i, 1]
             if norm(human_goal[e, i, 0] - x, human_goal[e, i, 1] - y) < reach:
@@ -253,6 +316,11 @@ def move_humans(
                     human_goal, goal_xy, robot_goal_radius, obstacle_kind, obstacle_xy,
                     obstacle_half,
                 )  # fmt: skip
+                if group >= 0:
+                    for j in range(num_humans):
+                        if human_group[e, j] == group:
+                            human_goal[e, j, 0] = human_goal[e, i, 0]
+                            human_goal[e, j, 1] = human_goal[e, i, 1]
 
 
 class HumanDynamics:
@@ -279,6 +347,8 @@ class HumanDynamics:
             self._radius[:, h] = params.robot_radius + params.orca_safety
         self._velocity = np.zeros((num_envs, h, 2))
         self._env_obstacles: orca.EnvObstacles | None = None
+        self.grouped = params.max_groups > 0
+        self._pull = np.zeros((num_envs, h, 2))
 
     def reset_obstacles(self, state: BatchState) -> None:
         """Rebuild the ORCA polygons of every env's tables and plants (after a reset)."""
@@ -295,6 +365,14 @@ class HumanDynamics:
         velocity = self._velocity
         velocity[:] = 0.0
         policies = state.human_policy
+        still = state.human_group >= 0
+        if self.grouped:
+            group_pull(state.human_xy, state.human_group, state.group_leader,
+                       state.group_standing, self._pull)  # fmt: skip
+            standing = np.take_along_axis(
+                state.group_standing, np.maximum(state.human_group, 0), axis=1
+            )
+            still &= standing
         if p.human_policy != "orca":
             sfm_velocities(
                 seed,
@@ -314,6 +392,9 @@ class HumanDynamics:
                 state.obstacle_kind,
                 state.obstacle_xy,
                 state.obstacle_half,
+                still,
+                self._pull,
+                self.grouped,
                 p.wall_half_size,
                 p.human_radius,
                 p.robot_radius,
@@ -328,7 +409,7 @@ class HumanDynamics:
                 velocity,
             )
         if p.human_policy != "sfm":
-            orca_v = self._orca(state)
+            orca_v = self._orca(state, still)
             is_orca = (policies == POLICY_ORCA)[..., None]
             np.copyto(velocity, orca_v, where=is_orca)
         # A human moves speed·dt along its velocity, so this caps every displacement at its
@@ -339,7 +420,7 @@ class HumanDynamics:
         np.multiply(velocity, limit / np.maximum(speed, limit), out=velocity)
         return velocity
 
-    def _orca(self, state: BatchState) -> np.ndarray:
+    def _orca(self, state: BatchState, still: np.ndarray) -> np.ndarray:
         p = self.params
         h = p.num_humans
         position = state.human_xy
@@ -351,6 +432,12 @@ class HumanDynamics:
             speed = np.minimum(speed, dist)
         pref = np.divide(to_goal * speed, dist, out=np.zeros_like(to_goal), where=dist > 0)
         compute = state.human_policy == POLICY_ORCA
+        if self.grouped:  # towards the goal and, beyond the threshold, back to the group
+            pref = pref + self._pull * state.human_max_speed[..., None]
+            length = np.linalg.norm(pref, axis=-1, keepdims=True)
+            limit = state.human_max_speed[..., None]
+            pref = pref * (limit / np.maximum(length, limit))
+            compute = compute & ~still  # a standing member stays (a still neighbour to others)
         max_speed = state.human_max_speed
         blind = None
         if self.robot_agent:
@@ -398,6 +485,9 @@ class HumanDynamics:
             state.obstacle_kind,
             state.obstacle_xy,
             state.obstacle_half,
+            state.human_group,
+            state.group_leader,
+            state.group_standing,
             self.stay_at_goal,
             p.human_speed_threshold,
             p.wall_half_size,

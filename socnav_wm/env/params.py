@@ -149,6 +149,16 @@ class EnvParams(Section):
     """How many plants (discs of ``plant_radius``) each scenario has, drawn in [low, high]."""
     plant_radius: float = positive(0.25)
     """A plant's radius (m)."""
+    groups: CountRange = (0, 0)
+    """How many walking groups each scenario has, drawn in [low, high]: members walk to one
+    shared goal and keep together (the cohesion of Moussaïd et al. 2010's group SFM: a member
+    farther than (n − 1)/2 m from the group's centre is drawn back to it). Room family only."""
+    standing_groups: CountRange = (0, 0)
+    """How many standing conversation groups each scenario has, drawn in [low, high]: members
+    stand on a circle facing its centre and never move."""
+    group_size: CountRange = (2, 4)
+    """Members per group, drawn per group in [low, high]; groups take humans in index order,
+    the first member of a walking group leads it; humans left over walk alone."""
     observed_obstacles: int = Field(0, ge=0)
     """M, the obstacles in the observation: the M nearest, nearest first, each as the nearest
     point of its outline in the robot's frame, its size (the radius of its enclosing circle)
@@ -191,7 +201,7 @@ class EnvParams(Section):
 
     @model_validator(mode="after")
     def _scenario_parts(self) -> Self:
-        for name in ("tables", "plants"):
+        for name in ("tables", "plants", "groups", "standing_groups", "group_size"):
             low, high = getattr(self, name)
             if not 0 <= low <= high:
                 raise ValueError(
@@ -207,6 +217,20 @@ class EnvParams(Section):
         if any(not (math.isfinite(v) and v > 0) for v in self.table_size):
             raise ValueError(
                 f"table_size: expected two positive sizes, got {list(self.table_size)}"
+            )
+        if self.group_size[0] < 2 and self.max_groups:
+            raise ValueError("group_size: a group has at least 2 members")
+        members = self.max_groups * self.group_size[1]
+        if members > self.num_humans:
+            raise ValueError(
+                f"groups, standing_groups: up to {self.max_groups} groups of up to "
+                f"{self.group_size[1]} need {members} humans, more than num_humans "
+                f"{self.num_humans}"
+            )
+        if self.scenario != "room" and self.max_groups:
+            raise ValueError(
+                f"groups, standing_groups: groups are placed in the room family only, not in "
+                f"{self.scenario}"
             )
         if self.observed_obstacles and not self.max_obstacles:
             raise ValueError("observed_obstacles: the scenario has no tables or plants to observe")
@@ -323,6 +347,11 @@ class EnvParams(Section):
         )
         left = self.goal_area_left(self.min_goal_distance) * (2 * self.centre_half_size(goal)) ** 2
         return max(0, math.floor(min(packing, GOAL_CROWDING * left / blocking)))
+
+    @property
+    def max_groups(self) -> int:
+        """The most groups (walking and standing) a scenario can have (the state's slots)."""
+        return self.groups[1] + self.standing_groups[1]
 
     @property
     def max_obstacles(self) -> int:

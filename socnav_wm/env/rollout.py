@@ -59,6 +59,7 @@ def run_episodes(
     sim = Simulator(len(ids), params)
     obs, info = sim.reset(seed=seed, scenario_ids=ids)
     info["human_theta"] = sim.state.human_theta()
+    groups = sim.state.human_group.copy()
     frames = [info]
     steps = []
     commands = []
@@ -102,6 +103,7 @@ def run_episodes(
                 collision=None if collision == 0 else COLLISION_NAMES[collision],
                 truncated=bool(end.truncated[e]),
                 commands=executed[:last, e].copy(),
+                human_group=groups[e],
             )
         )
     return episodes

@@ -65,6 +65,8 @@ STREAM_HUMAN_TRAITS = (
     8  # a human's speed (i = human, j = 0) and whether it ignores the robot (j = 1)
 )
 STREAM_CROSSING = 9  # crossing families: start (i = human, j = attempt) and goal draws
+STREAM_GROUPS = 10  # group counts (i = 0, j = kind), sizes (i = slot + 1) and placements
+STANDING_GAP = 0.15  # m between neighbours of a standing group, surface to surface
 
 FAMILY_CODES = {"room": 0, "circle_crossing": 1, "square_crossing": 2}
 SEES_PAPER = 0  # humans_see_robot: paper
@@ -244,6 +246,133 @@ def spawn_obstacles(
 
 
 @numba.njit(cache=True, error_model="numpy")
+def assign_groups(
+    e: int,
+    seed: int,
+    s: int,
+    num_humans: int,
+    counts: np.ndarray,
+    sizes: np.ndarray,
+    human_group: np.ndarray,
+    group_leader: np.ndarray,
+    group_standing: np.ndarray,
+) -> None:
+    """Scenario ``s``'s groups in slot ``e``: a count of walking then of standing groups
+    (``counts``: [low, high] of each), each of a size drawn in ``sizes``; members take the
+    humans in index order (the first leads), the humans left over walk alone."""
+    human_group[e, :] = -1
+    group_leader[e, :] = -1
+    group_standing[e, :] = False
+    taken = 0
+    slot = 0
+    for kind in range(2):
+        low = counts[2 * kind]
+        high = counts[2 * kind + 1]
+        u = uniform(seed, s, STREAM_GROUPS, 0, kind, 0)
+        count = low + min(high - low, int(u * (high - low + 1)))
+        for _ in range(count):
+            u = uniform(seed, s, STREAM_GROUPS, slot + 1, 0, 0)
+            size = sizes[0] + min(sizes[1] - sizes[0], int(u * (sizes[1] - sizes[0] + 1)))
+            size = min(size, num_humans - taken)
+            if size < 2:
+                return
+            group_leader[e, slot] = taken
+            group_standing[e, slot] = kind == 1
+            for m in range(size):
+                human_group[e, taken + m] = slot
+            taken += size
+            slot += 1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _disc_is_free(
+    e: int,
+    h: int,
+    x: float,
+    y: float,
+    wall_half: float,
+    robot_xy: np.ndarray,
+    robot_radius: float,
+    human_xy: np.ndarray,
+    human_radius: float,
+    obstacle_kind: np.ndarray,
+    obstacle_xy: np.ndarray,
+    obstacle_half: np.ndarray,
+) -> bool:
+    """Whether human ``h`` fits at (x, y): off the walls, the obstacles, the robot and the
+    humans placed before it (indices below ``h``)."""
+    if touches_wall(x, y, human_radius, wall_half):
+        return False
+    if _discs_touch(x, y, robot_xy[e, 0], robot_xy[e, 1], robot_radius + human_radius):
+        return False
+    if disc_clearance(e, x, y, human_radius, obstacle_kind, obstacle_xy, obstacle_half) <= 0.0:
+        return False
+    for other in range(h):
+        if _discs_touch(x, y, human_xy[e, other, 0], human_xy[e, other, 1], 2.0 * human_radius):
+            return False
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _place_group_member(
+    e: int, seed: int, s: int, h: int, half: float, wall_half: float, robot_xy: np.ndarray,
+    robot_radius: float, human_xy: np.ndarray, human_radius: float, human_group: np.ndarray,
+    group_leader: np.ndarray, group_standing: np.ndarray, human_heading: np.ndarray,
+    obstacle_kind: np.ndarray, obstacle_xy: np.ndarray, obstacle_half: np.ndarray,
+) -> bool:  # fmt: skip
+    """Place human ``h`` of a group: a walking member beside its leader (0–0.5 m apart,
+    farther only when that is full; facing the leader's way); a standing group's leader places
+    the whole circle (members facing its centre), its other members are then already placed.
+    False: no place found."""
+    g = human_group[e, h]
+    leader = group_leader[e, g]
+    if group_standing[e, g]:
+        if h != leader:
+            return True
+        size = 0
+        for j in range(human_group.shape[1]):
+            if human_group[e, j] == g:
+                size += 1
+        ring = (human_radius + 0.5 * STANDING_GAP) / math.sin(math.pi / size)
+        for attempt in range(MAX_SPAWN_ATTEMPTS):
+            cx = (2.0 * uniform(seed, s, STREAM_GROUPS, h, attempt, 0) - 1.0) * half
+            cy = (2.0 * uniform(seed, s, STREAM_GROUPS, h, attempt, 1) - 1.0) * half
+            turn = uniform(seed, s, STREAM_GROUPS, h, attempt, 2) * 2.0 * math.pi
+            ok = True
+            for m in range(size):
+                angle = turn + 2.0 * math.pi * m / size
+                x = cx + ring * math.cos(angle)
+                y = cy + ring * math.sin(angle)
+                if not _disc_is_free(e, h + m, x, y, wall_half, robot_xy, robot_radius,
+                                     human_xy, human_radius, obstacle_kind, obstacle_xy,
+                                     obstacle_half):  # fmt: skip
+                    ok = False
+                    break
+                human_xy[e, h + m, 0] = x
+                human_xy[e, h + m, 1] = y
+                human_heading[e, h + m, 0] = -math.cos(angle)
+                human_heading[e, h + m, 1] = -math.sin(angle)
+            if ok:
+                return True
+        return False
+    for attempt in range(MAX_SPAWN_ATTEMPTS):
+        angle = uniform(seed, s, STREAM_GROUPS, h, attempt, 0) * 2.0 * math.pi
+        # Within 0.5 m of the leader first; farther as attempts fail (a leader near a corner).
+        reach = min(0.5 + 0.01 * attempt, 4.0 * half)
+        gap = 2.0 * human_radius + reach * uniform(seed, s, STREAM_GROUPS, h, attempt, 1)
+        x = human_xy[e, leader, 0] + gap * math.cos(angle)
+        y = human_xy[e, leader, 1] + gap * math.sin(angle)
+        if _disc_is_free(e, h, x, y, wall_half, robot_xy, robot_radius, human_xy, human_radius,
+                         obstacle_kind, obstacle_xy, obstacle_half):  # fmt: skip
+            human_xy[e, h, 0] = x
+            human_xy[e, h, 1] = y
+            human_heading[e, h, 0] = human_heading[e, leader, 0]
+            human_heading[e, h, 1] = human_heading[e, leader, 1]
+            return True
+    return False
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _human_traits(
     e: int,
     seed: int,
@@ -295,6 +424,8 @@ def spawn(
     obstacle_counts: np.ndarray,
     table_half: np.ndarray,
     plant_radius: float,
+    group_counts: np.ndarray,
+    group_sizes: np.ndarray,
     robot_xy: np.ndarray,
     robot_theta: np.ndarray,
     goal_xy: np.ndarray,
@@ -309,6 +440,9 @@ def spawn(
     obstacle_kind: np.ndarray,
     obstacle_xy: np.ndarray,
     obstacle_half: np.ndarray,
+    human_group: np.ndarray,
+    group_leader: np.ndarray,
+    group_standing: np.ndarray,
 ) -> int:
     """Draw the initial state of scenario ``scenario_ids[n]`` (the ``room`` family) into slot
     ``envs[n]``.
@@ -352,12 +486,30 @@ def spawn(
         if not placed:
             failures += 1
         robot_theta[e] = (2.0 * uniform(seed, s, STREAM_ROBOT, 1, 0, 0) - 1.0) * math.pi
-        # 2. Humans: off the walls, the obstacles, the robot and the humans placed before.
+        # 2. Humans: off the walls, the obstacles, the robot and the humans placed before; a
+        # group's members beside their leader or on their circle.
+        if group_leader.shape[1]:
+            assign_groups(e, seed, s, num_humans, group_counts, group_sizes, human_group,
+                          group_leader, group_standing)  # fmt: skip
         for h in range(num_humans):
             _human_traits(
                 e, seed, s, h, policy_mode, human_max_speed, speed_range, sees_mode, ignore_prob,
                 human_max_speeds, human_policy, human_sees_robot,
             )  # fmt: skip
+            heading = (2.0 * uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 1) - 1.0) * math.pi
+            group = human_group[e, h]
+            if group >= 0 and (group_standing[e, group] or group_leader[e, group] != h):
+                if not _place_group_member(
+                    e, seed, s, h, half, wall_half, robot_xy, robot_radius, human_xy,
+                    human_radius, human_group, group_leader, group_standing, human_heading,
+                    obstacle_kind, obstacle_xy, obstacle_half,
+                ):  # fmt: skip
+                    failures += 1
+                standing = group_standing[e, group]
+                human_speed[e, h] = 0.0 if standing else (
+                    uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 0) * human_max_speeds[e, h]
+                )  # fmt: skip
+                continue
             placed = False
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 hx = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 0) - 1.0) * half
@@ -387,12 +539,21 @@ def spawn(
             human_speed[e, h] = (
                 uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 0) * human_max_speeds[e, h]
             )
-            heading = (2.0 * uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 1) - 1.0) * math.pi
             human_heading[e, h, 0] = math.cos(heading)
             human_heading[e, h, 1] = math.sin(heading)
         # 3. Human goals: off the walls, the obstacles, the robot, every human and the goals
         # drawn before.
         for h in range(num_humans):
+            human_goal_index[e, h] = 0
+            group = human_group[e, h]
+            if group >= 0 and group_standing[e, group]:  # a conversation: where it stands
+                human_goal[e, h, 0] = human_xy[e, h, 0]
+                human_goal[e, h, 1] = human_xy[e, h, 1]
+                continue
+            if group >= 0 and group_leader[e, group] != h:  # the group's shared goal
+                human_goal[e, h, 0] = human_goal[e, group_leader[e, group], 0]
+                human_goal[e, h, 1] = human_goal[e, group_leader[e, group], 1]
+                continue
             placed = False
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 gx, gy = draw_human_goal(seed, s, h, 0, attempt, half)
@@ -407,7 +568,6 @@ def spawn(
                 failures += 1
             human_goal[e, h, 0] = gx
             human_goal[e, h, 1] = gy
-            human_goal_index[e, h] = 0
         # 4. Robot goal: off the walls, the obstacles, the robot, every human and human goal.
         robot_gap = max(min_goal_distance, goal_radius + robot_radius)
         placed = False

@@ -44,6 +44,9 @@ class BatchState:
     human_policy: np.ndarray  # (N, H) int8: scenario.POLICY_SFM or POLICY_ORCA
     human_max_speed: np.ndarray  # (N, H) each human's preferred (and maximum) speed, m/s
     human_sees_robot: np.ndarray  # (N, H) bool: the human reacts to the robot this episode
+    human_group: np.ndarray  # (N, H) int64: the group a human belongs to, -1 alone
+    group_leader: np.ndarray  # (N, G) int64: a group's first member, -1 for an unused slot
+    group_standing: np.ndarray  # (N, G) bool: a standing conversation group
     obstacle_kind: np.ndarray  # (N, O) int8: OBSTACLE_NONE (empty slot), _TABLE or _PLANT
     obstacle_xy: np.ndarray  # (N, O, 2) centres, m
     obstacle_half: np.ndarray  # (N, O, 2) half width and depth of a table; a plant: (r, r), m
@@ -54,8 +57,10 @@ class BatchState:
     done: np.ndarray  # (N,) bool: the episode in this slot has ended and awaits a reset
 
     @classmethod
-    def zeros(cls, num_envs: int, num_humans: int, num_obstacles: int = 0) -> BatchState:
-        n, h, o = num_envs, num_humans, num_obstacles
+    def zeros(
+        cls, num_envs: int, num_humans: int, num_obstacles: int = 0, num_groups: int = 0
+    ) -> BatchState:
+        n, h, o, g = num_envs, num_humans, num_obstacles, num_groups
         return cls(
             robot_xy=np.zeros((n, 2)),
             robot_theta=np.zeros(n),
@@ -72,6 +77,9 @@ class BatchState:
             human_policy=np.zeros((n, h), dtype=np.int8),
             human_max_speed=np.zeros((n, h)),
             human_sees_robot=np.zeros((n, h), dtype=bool),
+            human_group=np.full((n, h), -1, dtype=np.int64),
+            group_leader=np.full((n, g), -1, dtype=np.int64),
+            group_standing=np.zeros((n, g), dtype=bool),
             obstacle_kind=np.zeros((n, o), dtype=np.int8),
             obstacle_xy=np.zeros((n, o, 2)),
             obstacle_half=np.zeros((n, o, 2)),

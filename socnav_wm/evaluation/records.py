@@ -64,7 +64,13 @@ trained)."""
 EPISODE_KEY_COLUMNS: tuple[str, ...] = ("method", "training_seed", "scenario_id")
 """Columns identifying an episode, in both tables."""
 
-OUTCOMES: tuple[str, ...] = ("success", "human_collision", "wall_collision", "timeout")
+OUTCOMES: tuple[str, ...] = (
+    "success",
+    "human_collision",
+    "wall_collision",
+    "obstacle_collision",
+    "timeout",
+)
 """Values of the ``outcome`` column: how an episode ended (exactly one of them)."""
 
 METADATA_KEY = b"socnav-wm"
@@ -113,6 +119,7 @@ def trajectory_from_episode(episode: Episode) -> Trajectory:
         success=episode.success,
         collision=episode.collision,
         truncated=episode.truncated,
+        human_group=episode.human_group,
     )
 
 
@@ -160,7 +167,8 @@ def trajectories_table(
       step t);
     * ``robot_x``, ``robot_y``, ``robot_theta``, ``goal_x``, ``goal_y`` (float64);
     * ``human_xy``: fixed-size list of ``H`` fixed-size lists ``[x, y]`` (float64);
-      ``human_theta``: fixed-size list of ``H`` headings (float64);
+      ``human_theta``: fixed-size list of ``H`` headings (float64); ``human_group``: fixed-size
+      list of ``H`` group numbers (−1: alone; float64 holding integers), the episode's;
     * the step that led to state ``t`` (null at ``t = 0``): ``action`` (int8: the discrete
       action 0–3 of an agent; −1 for a baseline, which sends continuous commands), ``v`` and
       ``omega`` (float64, the command the robot executed, m/s and rad/s), ``reward`` (float64)
@@ -175,6 +183,7 @@ def trajectories_table(
     goal = np.empty((rows, 2))
     human_xy = np.empty((rows, h, 2))
     human_theta = np.empty((rows, h))
+    human_group = np.full((rows, h), -1, dtype=np.int64)
     action = np.full(rows, -1, dtype=np.int8)
     command = np.zeros((rows, 2))
     reward = np.zeros(rows)
@@ -195,6 +204,8 @@ def trajectories_table(
         goal[block] = e.goal_xy
         human_xy[block] = e.human_xy
         human_theta[block] = e.human_theta
+        if e.human_group is not None:
+            human_group[block] = e.human_group
         actions = np.asarray(e.actions)
         if actions.ndim == 1:  # discrete actions of an agent
             action[steps] = actions
@@ -226,6 +237,7 @@ def trajectories_table(
             "goal_y": pa.array(goal[:, 1]),
             "human_xy": _fixed_list(human_xy),
             "human_theta": _fixed_list(human_theta),
+            "human_group": _fixed_list(human_group),
             "action": with_nulls(action),
             "v": with_nulls(command[:, 0]),
             "omega": with_nulls(command[:, 1]),
@@ -305,6 +317,11 @@ def episode_from_trajectories(
         collision=end.removesuffix("_collision") if end.endswith("_collision") else None,
         truncated=end == "timeout",
         commands=commands,
+        human_group=(
+            _fixed_list_numpy(rows["human_group"], (num_humans,))[0].astype(np.int64)
+            if "human_group" in rows.column_names
+            else None
+        ),
     )
 
 

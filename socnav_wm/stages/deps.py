@@ -43,6 +43,10 @@ STAGE_MODULES: dict[str, str] = {
     "study_sort_humans": "socnav_wm.studies.runner",
     # studies/dvc.yaml: the claims with the studies' evidence, after them and the report.
     "study_claims": "socnav_wm.stages.study_claims",
+    # scenarios/dvc.yaml: every non-learning method in every scenario preset, and the table.
+    "scenario_robots": "socnav_wm.stages.evaluate",
+    "scenario_planners": "socnav_wm.stages.evaluate",
+    "scenarios_report": "socnav_wm.stages.scenarios_report",
 }
 """Stage name → the module its command runs."""
 
@@ -55,18 +59,27 @@ STAGE_METHODS: dict[str, tuple[str, ...]] = {
     "study_horizon": VARIANT_NAMES,
     "study_seeds": VARIANT_NAMES,
     "study_sort_humans": VARIANT_NAMES,
+    "scenario_robots": BASELINE_NAMES,
+    "scenario_planners": ("cv-mpc", "oracle-mpc"),
 }
 """Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).
 The registry imports a method's builder only when it builds a policy, out of the imports'
 sight: the stage's modules are its command's module and these methods' builders
 (:attr:`socnav_wm.methods.Method.builder`)."""
 
+
+def _in_folder(stage: str) -> str:
+    return "studies" if stage.startswith("study_") else "scenarios" if "scenario" in stage else ""
+
+
 PIPELINE_FILES: dict[str, tuple[str, ...]] = {
-    "dvc.yaml": tuple(stage for stage in STAGE_MODULES if not stage.startswith("study_")),
-    "studies/dvc.yaml": tuple(stage for stage in STAGE_MODULES if stage.startswith("study_")),
+    "dvc.yaml": tuple(stage for stage in STAGE_MODULES if not _in_folder(stage)),
+    "studies/dvc.yaml": tuple(s for s in STAGE_MODULES if _in_folder(s) == "studies"),
+    "scenarios/dvc.yaml": tuple(s for s in STAGE_MODULES if _in_folder(s) == "scenarios"),
 }
-"""Each pipeline file → its stages: the paper's pipeline at the root, the studies (hours of
-trainings that a plain ``dvc repro`` must not start) in ``studies/``."""
+"""Each pipeline file → its stages: the paper's pipeline at the root; the studies (hours of
+trainings that a plain ``dvc repro`` must not start) in ``studies/``; the scenario presets'
+evaluations in ``scenarios/``."""
 
 NOT_DEPENDENCIES = frozenset({"socnav_wm.cli", "socnav_wm.tracking"})
 
@@ -151,14 +164,15 @@ def _pipeline_file(path: str | Path) -> str:
     path = Path(path)
     if path.name != "dvc.yaml":
         raise ValueError(f"{path}: not a dvc.yaml")
-    return "studies/dvc.yaml" if path.parent.name == "studies" else "dvc.yaml"
+    folder = path.parent.name
+    return f"{folder}/dvc.yaml" if folder in ("studies", "scenarios") else "dvc.yaml"
 
 
 def _stage_definitions(dvc_yaml: dict) -> dict[str, dict]:
     """Stage name → its definition (the ``do:`` body of a ``foreach``)."""
     stages = {}
     for name, body in (dvc_yaml.get("stages") or {}).items():
-        stages[name] = body.get("do", body) if "foreach" in body else body
+        stages[name] = body.get("do", body) if "foreach" in body else body  # or a matrix
     return stages
 
 

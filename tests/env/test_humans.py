@@ -92,7 +92,8 @@ def test_speeds_below_the_threshold_stop_the_human() -> None:
     move_humans(
         0, np.array([0]), np.array([True]), np.array([[[0.0, 0.04]]]), xy, heading, speed, goal,
         np.zeros((1, 1), dtype=np.int64), np.array([[-4.0, -4.0]]), np.array([[4.0, 4.0]]),
-        np.zeros((1, 0), dtype=np.int8), np.zeros((1, 0, 2)), np.zeros((1, 0, 2)), False,
+        np.zeros((1, 0), dtype=np.int8), np.zeros((1, 0, 2)), np.zeros((1, 0, 2)),
+        np.full((1, 1), -1), np.zeros((1, 0), dtype=np.int64), np.zeros((1, 0), dtype=bool), False,
         0.05, 4.8, 4.5, 0.36, 0.3, 0.25, 0.5, 1.0,
     )  # fmt: skip
     assert speed[0, 0] == 0.0
@@ -151,7 +152,7 @@ def test_velocities_are_capped_at_max_speed_whatever_the_policy_returns(monkeypa
     sim = Simulator(1, params)
     sim.reset(seed=0)
     too_fast = np.full((1, params.num_humans, 2), 0.2)
-    monkeypatch.setattr(humans.HumanDynamics, "_orca", lambda self, state: too_fast)
+    monkeypatch.setattr(humans.HumanDynamics, "_orca", lambda self, state, still: too_fast)
     before = sim.state.human_xy.copy()
     sim.step(np.array([0]))
     step = np.linalg.norm(sim.state.human_xy - before, axis=-1)

@@ -1,0 +1,218 @@
+"""The room a world model has, per scenario preset: every non-learning method's test metrics in
+each preset, ``oracle-mpc`` − ``cv-mpc`` paired, and the field's published numbers side by side.
+
+Reads what the ``scenarios`` pipeline (``scenarios/dvc.yaml``) writes: for preset ``P`` and
+method ``M``, ``metrics/scenarios/P/M.json`` (the format of ``metrics/eval/M.json``) and the
+episodes ``data/scenarios/P/M.parquet`` (for the paired comparison, scenario by scenario).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pyarrow.parquet as pq
+
+from socnav_wm.evaluation.comparisons import compare
+from socnav_wm.io import read_json
+
+__all__ = [
+    "PUBLISHED",
+    "SCENARIO_METHODS",
+    "TABLE_METRICS",
+    "Published",
+    "ScenarioTable",
+    "scenario_table",
+]
+
+SCENARIO_METHODS: tuple[str, ...] = ("orca", "sfm", "cv-mpc", "oracle-mpc")
+"""The non-learning methods evaluated in every preset, in the table's order."""
+
+TABLE_METRICS: tuple[tuple[str, str], ...] = (
+    ("success", "success"),
+    ("human_collision", "human coll."),
+    ("obstacle_collision", "obstacle coll."),
+    ("wall_collision", "wall coll."),
+    ("max_steps", "timeout"),
+    ("time_to_reach_goal", "time to goal (s)"),
+)
+"""(metric, column title) of the per-preset table; rates in %, the time in seconds."""
+
+GAP_POINTS = 3.0
+"""``oracle-mpc`` − ``cv-mpc`` success, in points, that makes a preset one where a world model
+has room to matter (with its 95% interval above 0)."""
+
+
+@dataclass(frozen=True)
+class Published:
+    """A published row of the field's benchmark, for one preset and method."""
+
+    preset: str
+    method: str
+    success: float
+    collision: float
+    time: float
+    source: str
+
+
+PUBLISHED: tuple[Published, ...] = (
+    Published(
+        "crowdnav",
+        "orca",
+        0.43,
+        0.57,
+        10.86,
+        "CrowdNav (Chen et al., ICRA 2019, Table I, invisible robot; vita-epfl/CrowdNav "
+        "`test.py --policy orca`, 500 cases)",
+    ),
+    Published(
+        "crowdnav-20",
+        "orca",
+        0.69,
+        0.29,
+        14.77,
+        "CrowdNav++ (Shuijing725/CrowdNav_Prediction_AttnGraph, "
+        "trained_models/ORCA_no_rand/test/test_00000.pt.log)",
+    ),
+    Published(
+        "crowdnav-20",
+        "sfm",
+        0.34,
+        0.64,
+        19.95,
+        "CrowdNav++ (trained_models/SF_no_rand/test/test_00000.pt.log)",
+    ),
+)
+"""The numbers the presets ``crowdnav`` and ``crowdnav-20`` are compared with (success rate,
+collision rate, mean time to goal of the successes in seconds)."""
+
+
+@dataclass(frozen=True)
+class ScenarioTable:
+    """What :func:`scenario_table` found."""
+
+    summaries: dict[str, dict[str, dict[str, dict[str, float]]]]
+    """preset → method → metric → {mean, low, high, n}."""
+    gaps: dict[str, dict[str, Any]]
+    """preset → the paired ``oracle-mpc`` − ``cv-mpc`` success difference (points)."""
+    missing: list[str]
+    """``preset/method`` pairs without a metrics file."""
+
+    def markdown(self) -> str:
+        """The per-preset table, the gaps and the published comparisons, as markdown."""
+        lines = [
+            "| preset | method | " + " | ".join(title for _, title in TABLE_METRICS) + " |",
+            "|---|---|" + "---|" * len(TABLE_METRICS),
+        ]
+        for preset, methods in self.summaries.items():
+            for method, metrics in methods.items():
+                cells = [_cell(metric, metrics.get(metric)) for metric, _ in TABLE_METRICS]
+                lines.append(f"| `{preset}` | `{method}` | " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            "Rates in % of the test scenarios with their 95% intervals; time to goal: mean "
+            "over the successful episodes (s).",
+            "",
+            "| preset | `oracle-mpc` − `cv-mpc` success (points, paired) | p (McNemar) | "
+            f"room for a world model (≥ {GAP_POINTS:g} points, interval above 0) |",
+            "|---|---|---|---|",
+        ]
+        for preset, gap in self.gaps.items():
+            verdict = "yes" if gap["room"] else "no"
+            lines.append(
+                f"| `{preset}` | {gap['difference']:+.1f} [{gap['low']:+.1f}, "
+                f"{gap['high']:+.1f}] | {_p(gap['p_value'])} | {verdict} |"
+            )
+        published = self.published_rows()
+        if published:
+            lines += [
+                "",
+                "| preset | method | published success / collision / time | here: success "
+                "[95%] / collision / time | published success in the interval |",
+                "|---|---|---|---|---|",
+                *published,
+            ]
+        return "\n".join(lines) + "\n"
+
+    def published_rows(self) -> list[str]:
+        rows = []
+        for row in PUBLISHED:
+            metrics = self.summaries.get(row.preset, {}).get(row.method)
+            if metrics is None:
+                continue
+            success = metrics["success"]
+            collision = metrics["human_collision"]["mean"]
+            time = metrics["time_to_reach_goal"]["mean"]
+            inside = success["low"] <= row.success <= success["high"]
+            rows.append(
+                f"| `{row.preset}` | `{row.method}` | {row.success:.2f} / {row.collision:.2f} / "
+                f"{row.time:.2f} s | {success['mean']:.2f} [{success['low']:.2f}, "
+                f"{success['high']:.2f}] / {collision:.2f} / {time:.2f} s | "
+                f"{'yes' if inside else 'no'} |"
+            )
+        return rows
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"summaries": self.summaries, "gaps": self.gaps, "missing": self.missing}
+
+
+def _cell(metric: str, summary: Mapping[str, float] | None) -> str:
+    if summary is None or not math.isfinite(summary.get("mean", math.nan)):
+        return "–"
+    if metric == "time_to_reach_goal":
+        return f"{summary['mean']:.1f} [{summary['low']:.1f}, {summary['high']:.1f}]"
+    return f"{100 * summary['mean']:.1f} [{100 * summary['low']:.1f}, {100 * summary['high']:.1f}]"
+
+
+def _p(value: float) -> str:
+    return "–" if not math.isfinite(value) else ("< 0.001" if value < 0.001 else f"{value:.3f}")
+
+
+def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]) -> ScenarioTable:
+    """Every method of :data:`SCENARIO_METHODS` in every preset of ``presets`` that has a
+    metrics file in ``metrics_dir/PRESET/``; the gap where both planners' episodes are in
+    ``episodes_dir/PRESET/``.
+
+    Raises:
+        ValueError: no metrics file at all, or a file that is not an evaluation's (one line
+            naming it).
+    """
+    summaries: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
+    gaps: dict[str, dict[str, Any]] = {}
+    missing: list[str] = []
+    for preset in presets:
+        methods: dict[str, dict[str, dict[str, float]]] = {}
+        for method in SCENARIO_METHODS:
+            path = metrics_dir / preset / f"{method}.json"
+            if not path.is_file():
+                missing.append(f"{preset}/{method}")
+                continue
+            content = read_json(path)
+            if not isinstance(content, dict) or not isinstance(content.get("metrics"), dict):
+                raise ValueError(f"{path}: not an evaluation's metrics file (no `metrics`)")
+            absent = [m for m, _ in TABLE_METRICS if m not in content["metrics"]]
+            if absent:
+                raise ValueError(f"{path}: lacks the metric(s) {', '.join(absent)}")
+            methods[method] = {m: content["metrics"][m] for m, _ in TABLE_METRICS}
+        if methods:
+            summaries[preset] = methods
+        oracle = episodes_dir / preset / "oracle-mpc.parquet"
+        physics = episodes_dir / preset / "cv-mpc.parquet"
+        if oracle.is_file() and physics.is_file():
+            result = compare(pq.read_table(oracle), pq.read_table(physics), "success")
+            gaps[preset] = {
+                "difference": 100 * result.difference,
+                "low": 100 * result.low,
+                "high": 100 * result.high,
+                "p_value": result.p_value,
+                "scenarios": result.num_scenarios,
+                "room": 100 * result.difference >= GAP_POINTS and result.low > 0,
+            }
+    if not summaries:
+        raise ValueError(
+            f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
+        )
+    return ScenarioTable(summaries, gaps, missing)
