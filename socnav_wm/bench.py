@@ -77,16 +77,17 @@ def _peak_bytes(run: Callable[[], None]) -> int:
 
 
 def _env_stepper(
-    policy: str, n: int, seed: int, actions: np.ndarray
+    options: dict[str, Any], n: int, seed: int, actions: np.ndarray
 ) -> tuple[Any, Callable[[], int]]:
-    """A reset env and a function doing one step of it that returns the env-steps done."""
+    """A reset env of ``options`` (EnvParams fields) and a function doing one step of it that
+    returns the env-steps done."""
     import gymnasium as gym
 
     import socnav_wm  # noqa: F401  (registers SocNav-v0)
 
     cursor = [0]
     if n == 1:
-        env = gym.make("SocNav-v0", human_policy=policy)
+        env = gym.make("SocNav-v0", **options)
         env.reset(seed=seed)
 
         def single_step() -> int:
@@ -98,7 +99,7 @@ def _env_stepper(
             return 1
 
         return env, single_step
-    envs = gym.make_vec("SocNav-v0", num_envs=n, human_policy=policy)
+    envs = gym.make_vec("SocNav-v0", num_envs=n, **options)
     envs.reset(seed=seed)
 
     def batch_step() -> int:
@@ -114,33 +115,43 @@ def bench_env(
     policies: tuple[str, ...] = ENV_POLICIES,
     seconds: float = 2.0,
     seed: int = 0,
+    scenarios: dict[str, dict[str, Any]] | None = None,
 ) -> list[dict[str, Any]]:
     """Env-steps per second of random-action stepping, with autoreset, no rendering.
 
     Batch 1 goes through ``gym.make("SocNav-v0")`` (with gymnasium's default wrappers: what a
     user of the single env gets); larger batches through ``gym.make_vec("SocNav-v0", N)``.
     ``peak_mb`` is the peak of traced allocations (numpy arrays included) from building the env
-    through 20 steps: the simulator's own memory, not the interpreter's.
+    through 20 steps: the simulator's own memory, not the interpreter's. Rows per human policy
+    of the paper's scenario, or, given ``scenarios`` (name → EnvParams fields: a preset), per
+    scenario.
     """
+    if scenarios is None:
+        scenarios = {"paper": {}}
+        runs = [("paper", {"human_policy": policy}) for policy in policies]
+    else:
+        runs = list(scenarios.items())
     rows = []
-    for policy in policies:
+    for name, options in runs:
         for n in batch_sizes:
             actions = np.random.default_rng(seed).integers(0, 4, size=(16, n))
-            env, step = _env_stepper(policy, n, seed, actions)
+            env, step = _env_stepper(options, n, seed, actions)
             for _ in range(20):  # warm-up: compilation, caches
                 step()
             rate = _rate(step, seconds)
             env.close()
 
-            def lifecycle(policy=policy, n=n, actions=actions) -> None:
-                env, step = _env_stepper(policy, n, seed, actions)
+            def lifecycle(options=options, n=n, actions=actions) -> None:
+                env, step = _env_stepper(options, n, seed, actions)
                 for _ in range(20):
                     step()
                 env.close()
 
             rows.append(
                 {
-                    "humans": policy,
+                    "scenario": name,
+                    "humans": options.get("human_policy", "mixed"),
+                    "obstacles": _count_range(options, "tables", "plants"),
                     "batch": n,
                     "interface": "gym.make" if n == 1 else "gym.make_vec",
                     "steps_per_cpu_s": rate,
@@ -148,6 +159,13 @@ def bench_env(
                 }
             )
     return rows
+
+
+def _count_range(options: dict[str, Any], *names: str) -> str:
+    """``low–high`` of the sum of count ranges ``names`` of ``options`` (0 when absent)."""
+    low = sum(options.get(name, (0, 0))[0] for name in names)
+    high = sum(options.get(name, (0, 0))[1] for name in names)
+    return f"{low}–{high}" if high != low else str(low)
 
 
 COLLECT_MAX_EPISODES = 100_000

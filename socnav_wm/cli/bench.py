@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from socnav_wm.cli.application import UserError, bench_app, command, print_table
 from socnav_wm.cli.options import SharedOptions, available_cores, set_threads, shared_options
+from socnav_wm.layout import LAYOUT
 
 
 def print_machine(torch_build: bool = False) -> None:
@@ -34,16 +36,29 @@ def bench_env_command(
         list[str] | None, typer.Option(help="Human policies: sfm, orca, mixed (repeatable).")
     ] = None,
     seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per row (s).")] = 2.0,
+    overlay: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="A scenario preset (configs/scenarios/NAME.yaml; repeatable): rows per preset, "
+            "with its humans, instead of per --humans."
+        ),
+    ] = None,
 ) -> None:
     """Env-steps/s and peak memory of the simulator, random actions, one core."""
     from socnav_wm.bench import ENV_BATCH_SIZES, ENV_POLICIES, bench_env, one_core
+    from socnav_wm.config import load_params
 
     policies = tuple(humans or ENV_POLICIES)
     for policy in policies:
         if policy not in ENV_POLICIES:
             raise UserError(f"--humans: must be one of {', '.join(ENV_POLICIES)}, got {policy!r}")
+    scenarios = None
+    if overlay:
+        scenarios = {
+            path.stem: load_params(LAYOUT.params, overlays=[path]).env.to_dict() for path in overlay
+        }
     with one_core() as where:
-        rows = bench_env(tuple(batch or ENV_BATCH_SIZES), policies, seconds)
+        rows = bench_env(tuple(batch or ENV_BATCH_SIZES), policies, seconds, scenarios=scenarios)
     print_table(
         rows,
         f"socnav-wm bench env ({where}, one thread, {seconds:g} CPU-s per row)",

@@ -338,7 +338,7 @@ class Simulator:
         s.alive_sum[envs] = 0.0
         s.discomfort_sum[envs] = 0.0
         s.done[envs] = False
-        self._humans.reset_obstacles(s)
+        self._humans.reset_obstacles(s, envs)
         self._observe(envs)
 
     def restore(self, state: BatchState) -> None:

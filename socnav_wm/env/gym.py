@@ -16,6 +16,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from socnav_wm.env.core import MAX_SCENARIO_ID, NUM_ACTIONS, Simulator, StepResult
+from socnav_wm.env.observation import observation_size
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_NAMES
 
@@ -27,14 +28,15 @@ def _spaces(params: EnvParams, action_type: str) -> tuple[spaces.Box, spaces.Spa
         raise ValueError(
             f"action_type: must be one of {', '.join(ACTION_TYPES)}, got {action_type!r}"
         )
-    sim_dim = 2 + 7 * params.num_humans
+    sim_dim = observation_size(params.num_observed_humans, params.observed_obstacles)
     # Positions are bounded by the room's diagonal; the other entries by 1 (sin, cos) or by the
     # sum of the speeds — all well inside this bound.
     bound = np.float32(params.room_size * 1.5)
     observation_space = spaces.Box(-bound, bound, shape=(sim_dim,), dtype=np.float32)
     if action_type == "discrete":
         return observation_space, spaces.Discrete(NUM_ACTIONS)
-    high = np.array([params.robot_max_speed, params.robot_max_rotation], dtype=np.float32)
+    turn = params.robot_max_speed if params.kinematics == "holonomic" else params.robot_max_rotation
+    high = np.array([params.robot_max_speed, turn], dtype=np.float32)
     return observation_space, spaces.Box(-high, high, dtype=np.float32)
 
 
@@ -55,7 +57,8 @@ class SocNavEnv(gym.Env[np.ndarray, Any]):
 
     Keyword options are the fields of ``EnvParams`` (``num_humans``, ``human_policy``,
     ``reward``, ``room_size``, …) plus ``action_type`` (``discrete``: the paper's 4 actions;
-    ``continuous``: a (v m/s, ω rad/s) command, clipped to the robot's limits).
+    ``continuous``: a (v m/s, ω rad/s) command, or with ``kinematics="holonomic"`` a (vx, vy)
+    m/s velocity in the robot's frame, clipped to the robot's limits).
     ``reset(seed=s)`` starts scenario 0 of seed ``s``; later resets without a seed run scenarios
     1, 2, … of the same seed; ``reset(options={"scenario_id": i})`` runs scenario ``i``.
     """

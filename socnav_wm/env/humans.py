@@ -349,15 +349,24 @@ class HumanDynamics:
         self._env_obstacles: orca.EnvObstacles | None = None
         self.grouped = params.max_groups > 0
         self._pull = np.zeros((num_envs, h, 2))
+        self._still = np.zeros((num_envs, h), dtype=bool)
 
-    def reset_obstacles(self, state: BatchState) -> None:
-        """Rebuild the ORCA polygons of every env's tables and plants (after a reset)."""
+    def reset_obstacles(self, state: BatchState, envs: np.ndarray | None = None) -> None:
+        """Rebuild the ORCA polygons of the tables and plants of slots ``envs`` (default: all),
+        after they were reset."""
         if state.obstacle_kind.shape[1] == 0:
             return
-        self._env_obstacles = orca.EnvObstacles.from_polygons(
-            polygons(state.obstacle_kind, state.obstacle_xy, state.obstacle_half),
-            polygon_sizes(state.obstacle_kind),
+        rows = slice(None) if envs is None or self._env_obstacles is None else envs
+        kind = state.obstacle_kind[rows]
+        built = orca.EnvObstacles.from_polygons(
+            polygons(kind, state.obstacle_xy[rows], state.obstacle_half[rows]),
+            polygon_sizes(kind),
         )
+        if isinstance(rows, slice):
+            self._env_obstacles = built
+            return
+        for name in ("point", "next_index", "unit_dir", "is_convex", "count"):
+            getattr(self._env_obstacles, name)[rows] = getattr(built, name)
 
     def velocities(self, seed: int, state: BatchState) -> np.ndarray:
         """(N, H, 2) new velocities of every human (m/s), from the current snapshot."""
@@ -365,14 +374,14 @@ class HumanDynamics:
         velocity = self._velocity
         velocity[:] = 0.0
         policies = state.human_policy
-        still = state.human_group >= 0
+        still = self._still
         if self.grouped:
             group_pull(state.human_xy, state.human_group, state.group_leader,
                        state.group_standing, self._pull)  # fmt: skip
             standing = np.take_along_axis(
                 state.group_standing, np.maximum(state.human_group, 0), axis=1
             )
-            still &= standing
+            still = (state.human_group >= 0) & standing
         if p.human_policy != "orca":
             sfm_velocities(
                 seed,
