@@ -31,6 +31,15 @@ class Episode:
     up, continuous commands clipped to the robot's limits); None when not recorded."""
     human_group: np.ndarray | None = None
     """(H,) each human's group (−1: alone); None when not recorded."""
+    obstacle_kind: np.ndarray | None = None
+    """(O,) int8 the scenario's static obstacle slots: ``OBSTACLE_NONE`` (empty slot),
+    ``OBSTACLE_TABLE`` or ``OBSTACLE_PLANT`` (socnav_wm.env.state); None when the scenario has no
+    obstacles (the paper's) or they were not recorded."""
+    obstacle_xy: np.ndarray | None = None
+    """(O, 2) the obstacles' centres (m); None with ``obstacle_kind``."""
+    obstacle_half: np.ndarray | None = None
+    """(O, 2) a table's half width and depth, a plant's (r, r) (m); None with
+    ``obstacle_kind``."""
 
     @property
     def num_steps(self) -> int:

@@ -30,6 +30,9 @@ from socnav_wm.env.scenario import (
 )
 from socnav_wm.env.state import OBSTACLE_NONE, BatchState
 
+ORCA_KEEP_RIGHT = 0.02
+"""rad: how far to the right an ORCA human who sees the robot turns its preferred velocity."""
+
 # exp(-x) below exp(-40) ≈ 4e-18 is lost next to the desired force (≈ 0.08): skip the call.
 _EXP_CUTOFF = 40.0
 
@@ -93,7 +96,6 @@ def sfm_velocities(
     human_max_speed: np.ndarray,
     human_sees_robot: np.ndarray,
     robot_xy: np.ndarray,
-    robot_velocity: np.ndarray,
     sees_mode: int,
     stay_at_goal: bool,
     obstacle_kind: np.ndarray,
@@ -106,6 +108,9 @@ def sfm_velocities(
     human_radius: float,
     robot_radius: float,
     avoid_robot_prob: float,
+    robot_strength: float,
+    robot_range: float,
+    robot_side: float,
     r0: float,
     gamma: float,
     n: float,
@@ -123,7 +128,9 @@ def sfm_velocities(
     weighted by ``weight``. Velocity = force/m·dt, m = 1, capped at the human's ``max_speed``.
     The robot (``sees_mode``): ``SEES_PAPER``, it pushes as a wall with probability
     ``avoid_robot_prob`` per human per step; ``SEES_ALWAYS``, a human that sees it
-    (``human_sees_robot``) feels it as another person moving at ``robot_velocity``. With
+    (``human_sees_robot``) is pushed away from it, ``robot_strength·exp(−gap/robot_range)``
+    (gap surface to surface), plus ``robot_side`` times that to its right in proportion to how
+    squarely the robot stands between it and its goal. With
     ``stay_at_goal`` (the crossing families) the desired speed falls to ``dist/1 s`` within a
     metre of the goal, as CrowdNav's humans slow down there. With ``grouped``, a walking-group
     member adds ``max_speed·pull`` (:func:`group_pull`), and a ``still`` human (a standing
@@ -171,6 +178,22 @@ def sfm_velocities(
                     mag = weight * _wall_push(d - human_radius, r0)
                     fx += mag * (px - qx) / d
                     fy += mag * (py - qy) / d
+            # A human who sees the robot: pushed away from it and, when it stands between the
+            # human and its goal, to the human's right (it steps round it).
+            if sees_mode == SEES_ALWAYS and human_sees_robot[e, i] and gnorm > 0.0:
+                ox = px - robot_xy[e, 0]
+                oy = py - robot_xy[e, 1]
+                dist = norm(ox, oy)
+                if dist > 0.0:
+                    nx = ox / dist
+                    ny = oy / dist
+                    ux = gx / gnorm
+                    uy = gy / gnorm
+                    ahead = max(0.0, -(nx * ux + ny * uy))
+                    gap = dist - robot_radius - human_radius
+                    mag = weight * robot_strength * math.exp(-gap / robot_range)
+                    fx += mag * (nx + robot_side * ahead * uy)
+                    fy += mag * (ny - robot_side * ahead * ux)
             # The robot, seen only now and then, as in the paper's environment.
             if sees_mode == SEES_PAPER and avoid_robot_prob > 0.0:
                 coin = uniform(seed, scenario_id[e], STREAM_AVOID_ROBOT, i, step_count[e], 0)
@@ -185,29 +208,17 @@ def sfm_velocities(
             # Other humans.
             vix = human_speed[e, i] * human_heading[e, i, 0]
             viy = human_speed[e, i] * human_heading[e, i, 1]
-            for j in range(num_humans + 1):
+            for j in range(num_humans):
                 if j == i:
                     continue
-                if j < num_humans:
-                    ox = human_xy[e, j, 0]
-                    oy = human_xy[e, j, 1]
-                    ovx = human_speed[e, j] * human_heading[e, j, 0]
-                    ovy = human_speed[e, j] * human_heading[e, j, 1]
-                elif sees_mode == SEES_ALWAYS and human_sees_robot[e, i]:
-                    ox = robot_xy[e, 0]
-                    oy = robot_xy[e, 1]
-                    ovx = robot_velocity[e, 0]
-                    ovy = robot_velocity[e, 1]
-                else:
-                    continue
-                ex = ox - px
-                ey = oy - py
+                ex = human_xy[e, j, 0] - px
+                ey = human_xy[e, j, 1] - py
                 d_ij = norm(ex, ey)
                 if d_ij > 0.0:
                     ex /= d_ij
                     ey /= d_ij
-                dx = lam * (ovx - vix) + ex
-                dy = lam * (ovy - viy) + ey
+                dx = lam * (human_speed[e, j] * human_heading[e, j, 0] - vix) + ex
+                dy = lam * (human_speed[e, j] * human_heading[e, j, 1] - viy) + ey
                 dnorm = norm(dx, dy)
                 b = gamma * dnorm
                 if b == 0.0:
@@ -395,7 +406,6 @@ class HumanDynamics:
                 state.human_max_speed,
                 state.human_sees_robot,
                 state.robot_xy,
-                state.robot_velocity(),
                 self.sees_mode,
                 self.stay_at_goal,
                 state.obstacle_kind,
@@ -408,6 +418,9 @@ class HumanDynamics:
                 p.human_radius,
                 p.robot_radius,
                 PAPER_SFM_SEES_ROBOT,
+                p.sfm_robot_strength,
+                p.sfm_robot_range,
+                p.sfm_robot_side,
                 p.sfm_wall_range,
                 p.sfm_gamma,
                 p.sfm_n,
@@ -450,8 +463,17 @@ class HumanDynamics:
         max_speed = state.human_max_speed
         blind = None
         if self.robot_agent:
-            # The robot joins as an agent that does not reciprocate (compute=False), unseen by
-            # the humans who ignore it.
+            # Those who see the robot keep right: their preferred velocity turns by
+            # ORCA_KEEP_RIGHT, breaking the exact symmetry of a head-on meeting, where ORCA only
+            # slows down (RVO2's examples perturb it at random).
+            c, s = math.cos(ORCA_KEEP_RIGHT), math.sin(ORCA_KEEP_RIGHT)
+            turned = np.stack(
+                (c * pref[..., 0] + s * pref[..., 1], -s * pref[..., 0] + c * pref[..., 1]),
+                axis=-1,
+            )
+            pref = np.where(state.human_sees_robot[..., None], turned, pref)
+            # The robot joins as an agent that does not reciprocate (compute=False, the humans
+            # take all of the avoidance), unseen by the humans who ignore it.
             robot_v = state.robot_velocity()
             position = np.concatenate((position, state.robot_xy[:, None]), axis=1)
             current = np.concatenate((current, robot_v[:, None]), axis=1)
@@ -474,6 +496,7 @@ class HumanDynamics:
             self.orca_params,
             self._env_obstacles,
             blind,
+            self.robot_agent,
         )
         return new_v[:, :h]
 

@@ -508,6 +508,7 @@ def _orca_kernel(
     env_convex,
     env_count,
     blind_last,
+    last_unreciprocated,
     neighbor_dist,
     max_neighbors,
     time_horizon,
@@ -887,11 +888,13 @@ def _orca_kernel(
                     ux_ = scale * ux
                     uy_ = scale * uy
 
-                # Each agent takes half of the responsibility for avoiding the collision.
+                # Each agent takes half of the responsibility for avoiding the collision; all
+                # of it against a last agent that does not reciprocate (the robot).
+                share = 1.0 if last_unreciprocated and b == num_agents - 1 else 0.5
                 ld[n_lines, 0] = dx
                 ld[n_lines, 1] = dy
-                lp[n_lines, 0] = vx + 0.5 * ux_
-                lp[n_lines, 1] = vy + 0.5 * uy_
+                lp[n_lines, 0] = vx + share * ux_
+                lp[n_lines, 1] = vy + share * uy_
                 n_lines += 1
 
             # ---- solve ----
@@ -915,6 +918,7 @@ def orca_velocities(
     params: OrcaParams = OrcaParams(),  # noqa: B008 (frozen dataclass, safe as a default)
     env_obstacles: EnvObstacles | None = None,
     blind_last: np.ndarray | None = None,
+    last_unreciprocated: bool = False,
 ) -> np.ndarray:
     """New velocities chosen by ORCA for a batch of independent environments.
 
@@ -935,6 +939,8 @@ def orca_velocities(
             shared ones (None: none).
         blind_last: (num_envs, num_agents) bool; an agent marked does not see the last agent
             (a human who ignores the robot). None: every agent sees every other.
+        last_unreciprocated: the last agent does not reciprocate (the robot among humans):
+            the others take all of the avoidance of a collision with it, not half.
 
     Returns:
         (num_envs, num_agents, 2) float64 new velocities, m/s.
@@ -979,6 +985,7 @@ def orca_velocities(
         env_obstacles.is_convex,
         env_obstacles.count,
         blind_last,
+        bool(last_unreciprocated),
         float(params.neighbor_dist),
         int(params.max_neighbors),
         float(params.time_horizon),

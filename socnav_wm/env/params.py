@@ -109,8 +109,9 @@ class EnvParams(Section):
     humans_see_robot: bool | Literal["paper"] = "paper"
     """Whether the humans react to the robot. ``true``: each human sees it for the whole episode
     unless it drew "ignore" (``ignore_robot_prob``): an ORCA human treats it as an agent that
-    does not reciprocate, an SFM human feels it as another person (the anisotropic interaction
-    force, which steers round it). ``false``: no human sees it (CrowdNav's invisible robot).
+    does not reciprocate (and keeps right), an SFM human is pushed away from it and to its right
+    (``sfm_robot_*``); both step round it. ``false``: no human sees it (CrowdNav's invisible
+    robot).
     ``paper``: the paper's environment: SFM humans are pushed by it as by a wall on 5 % of steps
     (``PAPER_SFM_SEES_ROBOT``), ORCA humans never see it."""
     ignore_robot_prob: float = Field(0.0, ge=0, le=1, allow_inf_nan=False)
@@ -196,6 +197,15 @@ class EnvParams(Section):
     """SFM humans: n′ of the interaction's angular decay (sideways part)."""
     sfm_lambda: float = finite(1.0)
     """SFM humans: λ weighting the direction of motion against the relative position."""
+    sfm_robot_strength: float = non_negative(0.2)
+    """SFM humans who see the robot (``humans_see_robot: true``): the push away from it at
+    contact (in the units of the desired force, 0.14 m/s at full weight)."""
+    sfm_robot_range: float = positive(0.3)
+    """SFM humans who see the robot: the push decays as exp(−gap/range), gap surface to surface
+    (m)."""
+    sfm_robot_side: float = non_negative(1.0)
+    """SFM humans who see the robot: the share of the push turned to the human's right when
+    the robot stands between it and its goal (so it steps round it)."""
     sfm_weight: float = finite(1.0 / math.sqrt(3.0))
     """Weight of each of the three SFM force terms (goal, obstacles, other humans)."""
 

@@ -6,7 +6,9 @@ A 480 px frame costs well under a millisecond of drawing; the static walls are d
 (size, room) and copied.
 
 Coordinates: the image shows the square ``[−(L + w), L + w]²`` of the world, where ``L`` is the
-room's inner half size and ``w`` the wall thickness, so the walls fill the outer border. World
+room's inner half size and ``w`` the wall thickness, so the walls fill the outer border; a
+scene with a ``view_half_size`` shows ``[−v, v]²`` instead (the crossing families, whose walls
+are far away and not drawn, zoom on the crossing circle or square). World
 ``+x`` points right and world ``+y`` points **up** (image rows grow downwards, so ``y`` is
 flipped). Angles are world-frame, counter-clockwise from ``+x``, in radians.
 
@@ -29,17 +31,23 @@ from PIL import Image, ImageDraw, ImageFont
 
 from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
+from socnav_wm.env.state import OBSTACLE_NONE, OBSTACLE_PLANT, OBSTACLE_TABLE
 from socnav_wm.io import atomic_path
 
 __all__ = [
     "BACKGROUND_COLOR",
     "GOAL_COLOR",
+    "GROUP_COLOR",
     "HUMAN_COLOR",
     "PERSONAL_SPACE_COLOR",
+    "PLANT_COLOR",
     "ROBOT_COLOR",
+    "TABLE_COLOR",
     "TRAIL_COLOR",
     "WALL_COLOR",
     "Scene",
+    "episode_frames",
+    "episode_scene",
     "render_frame",
     "tile_frames",
     "world_to_pixel",
@@ -61,6 +69,10 @@ ROBOT_COLOR: RGB = (220, 50, 40)
 ROBOT_OUTLINE_COLOR: RGB = (110, 15, 10)
 TRAIL_COLOR: RGB = (245, 150, 30)
 HEADING_COLOR: RGB = (0, 0, 0)
+TABLE_COLOR: RGB = (160, 110, 60)
+PLANT_COLOR: RGB = (60, 150, 60)
+OBSTACLE_OUTLINE_COLOR: RGB = (80, 50, 20)
+GROUP_COLOR: RGB = (140, 40, 170)
 TEXT_COLOR: RGB = (0, 0, 0)
 
 
@@ -74,7 +86,8 @@ class Scene:
         robot_radius: robot radius (0.3).
         goal_xy: ``(2,)`` goal centre.
         goal_radius: goal disc radius (0.5); the goal counts as reached when the robot centre is
-            within ``robot_radius + goal_radius``.
+            within ``robot_radius + goal_radius``. 0 (CrowdNav's goal, reached within the robot
+            radius) draws a cross of the robot's size instead of a disc.
         human_xy: ``(H, 2)`` human centres (``H`` may be 0).
         human_theta: ``(H,)`` human headings.
         human_radius: human radius (0.36).
@@ -83,6 +96,18 @@ class Scene:
         wall_thickness: wall thickness (0.2).
         robot_trail: optional ``(K, 2)`` past robot positions, oldest first.
         title: short text drawn in the top-left corner (e.g. ``"step 12  sfm"``).
+        obstacle_kind: optional ``(O,)`` static obstacles: ``OBSTACLE_TABLE`` (a filled
+            rectangle), ``OBSTACLE_PLANT`` (a filled disc) or ``OBSTACLE_NONE`` (an empty slot,
+            not drawn); given with ``obstacle_xy`` and ``obstacle_half`` or not at all.
+        obstacle_xy: ``(O, 2)`` obstacle centres.
+        obstacle_half: ``(O, 2)`` a table's half width (x) and depth (y); a plant's ``(r, r)``.
+        human_group: optional ``(H,)`` each human's group (−1: alone); the members of a group are
+            joined by thin lines drawn under the bodies.
+        walls: whether to draw the walls (False for the crossing families, whose walls are far
+            away); walls are drawn only in the room's own view (``view_half_size`` None), where
+            they fill the border.
+        view_half_size: half width of the drawn square (m); None: the room and its walls,
+            ``room_half_size + wall_thickness``.
     """
 
     robot_xy: np.ndarray
@@ -98,6 +123,12 @@ class Scene:
     wall_thickness: float = 0.2
     robot_trail: np.ndarray | None = None
     title: str = ""
+    obstacle_kind: np.ndarray | None = None
+    obstacle_xy: np.ndarray | None = None
+    obstacle_half: np.ndarray | None = None
+    human_group: np.ndarray | None = None
+    walls: bool = True
+    view_half_size: float | None = None
 
     def __post_init__(self) -> None:
         robot = np.asarray(self.robot_xy, dtype=np.float64)
@@ -132,16 +163,48 @@ class Scene:
         }
         if trail is not None:
             arrays["robot_trail"] = trail
+        obstacles = (self.obstacle_kind, self.obstacle_xy, self.obstacle_half)
+        if any(o is not None for o in obstacles):
+            if any(o is None for o in obstacles):
+                raise ValueError(
+                    "obstacle_kind, obstacle_xy and obstacle_half must be given together"
+                )
+            kind = np.asarray(self.obstacle_kind).reshape(-1).astype(np.int64)
+            count = kind.shape[0]
+            for name in ("obstacle_xy", "obstacle_half"):
+                arr = np.asarray(getattr(self, name), dtype=np.float64)
+                if arr.size == 0:
+                    arr = arr.reshape(0, 2)
+                if arr.shape != (count, 2):
+                    raise ValueError(
+                        f"{name} must have shape (O, 2) = ({count}, 2), got {arr.shape}"
+                    )
+                arrays[name] = arr
+            object.__setattr__(self, "obstacle_kind", kind)
+        if self.human_group is not None:
+            groups = np.asarray(self.human_group).reshape(-1)
+            if groups.shape != (humans.shape[0],):
+                raise ValueError(
+                    f"human_group must have shape (H,) = ({humans.shape[0]},), got {groups.shape}"
+                )
+            object.__setattr__(self, "human_group", groups.astype(np.int64))
         for name, arr in arrays.items():
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"Scene.{name} contains non-finite values")
         if not math.isfinite(self.robot_theta):
             raise ValueError(f"Scene.robot_theta must be finite, got {self.robot_theta}")
-        for name in ("robot_radius", "goal_radius", "human_radius", "room_half_size"):
+        for name in ("robot_radius", "human_radius", "room_half_size"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"Scene.{name} must be a finite number > 0, got {value}")
-        for name in ("personal_space", "wall_thickness"):
+        if self.view_half_size is not None and not (
+            math.isfinite(self.view_half_size) and self.view_half_size > 0
+        ):
+            raise ValueError(
+                f"Scene.view_half_size must be None or a finite number > 0, "
+                f"got {self.view_half_size}"
+            )
+        for name in ("goal_radius", "personal_space", "wall_thickness"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"Scene.{name} must be a finite number >= 0, got {value}")
@@ -156,7 +219,9 @@ class Scene:
 
 
 def _extent(scene: Scene) -> float:
-    """Half width of the drawn world square, m: the room plus its walls."""
+    """Half width of the drawn world square, m: the room plus its walls, or the scene's view."""
+    if scene.view_half_size is not None:
+        return float(scene.view_half_size)
     return scene.room_half_size + scene.wall_thickness
 
 
@@ -191,7 +256,8 @@ def _circle_box(centre_px: np.ndarray, radius_px: float) -> list[float]:
 
 @lru_cache(maxsize=16)
 def _background(size: int, room_half_size: float, wall_thickness: float) -> Image.Image:
-    """Empty room with its walls: drawn once per geometry, copied for every frame."""
+    """Empty room with its walls filling the border (``wall_thickness`` 0: no walls): drawn
+    once per geometry, copied for every frame."""
     image = Image.new("RGB", (size, size), BACKGROUND_COLOR)
     if wall_thickness > 0:
         draw = ImageDraw.Draw(image)
@@ -225,8 +291,9 @@ def _font() -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
 def render_frame(scene: Scene, size: int = 480) -> np.ndarray:
     """Draw one scene.
 
-    Drawing order (later on top): walls, goal, personal-space rings, trail, humans, robot, title.
-    The heading lines start at 40 % of the radius, so the disc centre keeps the body colour.
+    Drawing order (later on top): walls, obstacles, goal, personal-space rings, group lines,
+    trail, humans, robot, title. The heading lines start at 40 % of the radius, so the disc
+    centre keeps the body colour.
 
     Args:
         scene: what to draw.
@@ -241,18 +308,37 @@ def render_frame(scene: Scene, size: int = 480) -> np.ndarray:
     extent = _extent(scene)
     scale = size / (2.0 * extent)  # px per m
 
-    image = _background(size, float(scene.room_half_size), float(scene.wall_thickness)).copy()
+    if scene.walls and scene.view_half_size is None:
+        image = _background(size, float(scene.room_half_size), float(scene.wall_thickness))
+    else:
+        # No walls, or a view other than the room's: nothing static to cache but the floor
+        # (walls are only drawn where they fill the border, i.e. in the room's own view).
+        image = _background(size, 1.0, 0.0)
+    image = image.copy()
     draw = ImageDraw.Draw(image)
     line_w = max(1, round(size / 240))
 
-    # Goal: a disc of the goal radius with a cross at its centre.
+    if (
+        scene.obstacle_kind is not None
+        and scene.obstacle_xy is not None
+        and scene.obstacle_half is not None
+    ):
+        _draw_obstacles(
+            draw, scene.obstacle_kind, scene.obstacle_xy, scene.obstacle_half, extent, size
+        )
+
+    # Goal: a disc of the goal radius with a cross at its centre; a goal of radius 0 (reached
+    # within the robot's radius) is a bolder cross of the robot's size.
     goal_px = world_to_pixel(scene.goal_xy, extent, size)
-    goal_r = scene.goal_radius * scale
-    draw.ellipse(_circle_box(goal_px, goal_r), fill=GOAL_COLOR)
-    arm = 0.6 * goal_r
     gx, gy = float(goal_px[0]), float(goal_px[1])
-    draw.line([(gx - arm, gy - arm), (gx + arm, gy + arm)], fill=GOAL_MARK_COLOR, width=line_w)
-    draw.line([(gx - arm, gy + arm), (gx + arm, gy - arm)], fill=GOAL_MARK_COLOR, width=line_w)
+    if scene.goal_radius > 0:
+        goal_r = scene.goal_radius * scale
+        draw.ellipse(_circle_box(goal_px, goal_r), fill=GOAL_COLOR)
+        arm, cross_w = 0.6 * goal_r, line_w
+    else:
+        arm, cross_w = max(3.0, scene.robot_radius * scale), line_w + 1
+    draw.line([(gx - arm, gy - arm), (gx + arm, gy + arm)], fill=GOAL_MARK_COLOR, width=cross_w)
+    draw.line([(gx - arm, gy + arm), (gx + arm, gy - arm)], fill=GOAL_MARK_COLOR, width=cross_w)
 
     humans_px = world_to_pixel(scene.human_xy, extent, size)
     human_r = scene.human_radius * scale
@@ -261,6 +347,9 @@ def render_frame(scene: Scene, size: int = 480) -> np.ndarray:
     if scene.personal_space > 0:
         for centre in humans_px:
             draw.ellipse(_circle_box(centre, ring_r), outline=PERSONAL_SPACE_COLOR, width=line_w)
+
+    if scene.human_group is not None:
+        _draw_groups(draw, humans_px, scene.human_group, line_w)
 
     if scene.robot_trail is not None and len(scene.robot_trail) >= 2:
         trail_px = world_to_pixel(scene.robot_trail, extent, size)
@@ -281,6 +370,48 @@ def render_frame(scene: Scene, size: int = 480) -> np.ndarray:
         draw.text((4, 2), scene.title, fill=TEXT_COLOR, font=font)
 
     return np.asarray(image, dtype=np.uint8)
+
+
+def _draw_obstacles(
+    draw: ImageDraw.ImageDraw,
+    kinds: np.ndarray,
+    centres: np.ndarray,
+    halves: np.ndarray,
+    extent: float,
+    size: int,
+) -> None:
+    """Tables as filled axis-aligned rectangles, plants as filled discs; empty slots skipped."""
+    scale = size / (2.0 * extent)
+    for kind, centre, half in zip(kinds, centres, halves, strict=True):
+        if kind == OBSTACLE_NONE:
+            continue
+        cx, cy = world_to_pixel(centre, extent, size).tolist()
+        hx, hy = float(half[0]) * scale, float(half[1]) * scale
+        box = [cx - hx, cy - hy, cx + hx, cy + hy]
+        if kind == OBSTACLE_TABLE:
+            draw.rectangle(box, fill=TABLE_COLOR, outline=OBSTACLE_OUTLINE_COLOR, width=1)
+        elif kind == OBSTACLE_PLANT:
+            draw.ellipse(box, fill=PLANT_COLOR, outline=OBSTACLE_OUTLINE_COLOR, width=1)
+
+
+def _draw_groups(
+    draw: ImageDraw.ImageDraw, humans_px: np.ndarray, groups: np.ndarray, line_w: int
+) -> None:
+    """Thin lines joining the members of each group: a closed polygon around the group's centre
+    (members in angular order, so a standing circle is drawn as its outline), one segment for
+    two."""
+    for g in np.unique(groups[groups >= 0]):
+        members = humans_px[groups == g]
+        if len(members) < 2:
+            continue
+        offset = members - members.mean(axis=0)
+        members = members[np.argsort(np.arctan2(offset[:, 1], offset[:, 0]))]
+        points = [tuple(p) for p in members.tolist()]
+        if len(points) > 2:
+            points.append(points[0])
+        # Twice the usual stroke: members stand 0.05–0.3 m apart, so only the gaps between
+        # their bodies show the line.
+        draw.line(points, fill=GROUP_COLOR, width=2 * line_w)
 
 
 def _draw_body(
@@ -448,7 +579,10 @@ def episode_frames(
 
 
 def episode_scene(episode: Episode, t: int, params: EnvParams, title: str = "") -> Scene:
-    """The :class:`Scene` of state ``t`` of a recorded episode, with the trail so far."""
+    """The :class:`Scene` of state ``t`` of a recorded episode, with the trail so far, its
+    obstacles and groups; the crossing families are drawn without walls, zoomed on the
+    crossing (``crossing_radius + crossing_noise + 1.5`` m each side of the centre)."""
+    crossing = params.scenario != "room"
     return Scene(
         robot_xy=episode.robot_xy[t],
         robot_theta=float(episode.robot_theta[t]),
@@ -463,4 +597,10 @@ def episode_scene(episode: Episode, t: int, params: EnvParams, title: str = "") 
         wall_thickness=params.wall_thickness,
         robot_trail=episode.robot_xy[: t + 1],
         title=title,
+        obstacle_kind=episode.obstacle_kind,
+        obstacle_xy=episode.obstacle_xy,
+        obstacle_half=episode.obstacle_half,
+        human_group=episode.human_group,
+        walls=not crossing,
+        view_half_size=(params.crossing_radius + params.crossing_noise + 1.5 if crossing else None),
     )

@@ -60,6 +60,11 @@ def run_episodes(
     obs, info = sim.reset(seed=seed, scenario_ids=ids)
     info["human_theta"] = sim.state.human_theta()
     groups = sim.state.human_group.copy()
+    # Static obstacles (fixed for the whole episode); none recorded when the scenario has none.
+    obstacles = params.max_obstacles > 0
+    obstacle_kind = sim.state.obstacle_kind.copy()
+    obstacle_xy = sim.state.obstacle_xy.copy()
+    obstacle_half = sim.state.obstacle_half.copy()
     frames = [info]
     steps = []
     commands = []
@@ -104,6 +109,9 @@ def run_episodes(
                 truncated=bool(end.truncated[e]),
                 commands=executed[:last, e].copy(),
                 human_group=groups[e],
+                obstacle_kind=obstacle_kind[e] if obstacles else None,
+                obstacle_xy=obstacle_xy[e] if obstacles else None,
+                obstacle_half=obstacle_half[e] if obstacles else None,
             )
         )
     return episodes
