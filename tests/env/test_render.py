@@ -257,3 +257,113 @@ def test_tile_frames_invalid():
         tile_frames([np.zeros((4, 4, 3), np.uint8)], columns=0)
     with pytest.raises(ValueError, match="shape"):
         tile_frames([np.zeros((4, 4, 3), np.uint8), np.zeros((4, 5, 3), np.uint8)], columns=2)
+
+
+# ---------------------------------------------------------------------------------------------
+# Scenario features: obstacles, groups, CrowdNav goals, crossing families
+# ---------------------------------------------------------------------------------------------
+
+
+def test_obstacles_have_their_colours_at_their_centres():
+    from socnav_wm.env.state import OBSTACLE_NONE, OBSTACLE_PLANT, OBSTACLE_TABLE
+
+    scene = make_scene(
+        obstacle_kind=np.array([OBSTACLE_TABLE, OBSTACLE_PLANT, OBSTACLE_NONE], dtype=np.int8),
+        obstacle_xy=np.array([[-2.0, -2.0], [2.0, 1.0], [0.0, 0.0]]),
+        obstacle_half=np.array([[0.6, 0.4], [0.25, 0.25], [0.5, 0.5]]),
+    )
+    frame = render_frame(scene)
+    # Table at (-2, -2) -> col 144, row 336; 0.5 m right of it is still table (half width 0.6).
+    assert tuple(frame[336, 144]) == r.TABLE_COLOR
+    assert tuple(frame[336, 144 + 24]) == r.TABLE_COLOR
+    # ... but 0.5 m above it is floor (half depth 0.4): the rectangle is not a square.
+    assert tuple(frame[336 - 24, 144]) == r.BACKGROUND_COLOR
+    # Plant at (2, 1) -> col 336, row 192.
+    assert tuple(frame[192, 336]) == r.PLANT_COLOR
+    # The empty slot at the origin is not drawn.
+    assert tuple(frame[240, 240]) == r.BACKGROUND_COLOR
+
+
+def test_group_members_are_joined():
+    scene = make_scene(
+        human_xy=np.array([[-3.0, 0.0], [-1.0, 0.0], [3.0, 3.0]]),
+        human_group=np.array([0, 0, -1]),
+    )
+    frame = render_frame(scene)
+    # Midpoint (-2, 0) of the pair -> col 144, row 240, between the two bodies.
+    assert near(frame, 240, 144, r.GROUP_COLOR, radius=1)
+    # Nothing joins the lone human: the midpoint (0, 1.5) towards it is floor.
+    assert tuple(frame[168, 240]) == r.BACKGROUND_COLOR
+    # No groups, no lines.
+    plain = render_frame(make_scene(human_group=np.array([-1, -1, -1])))
+    assert not np.any(np.all(plain == np.array(r.GROUP_COLOR, dtype=np.uint8), axis=-1))
+
+
+def test_goal_radius_zero_is_a_cross():
+    frame = render_frame(make_scene(goal_radius=0.0))
+    # Goal (0, -3) -> col 240, row 384: the cross's centre, no disc around it.
+    assert tuple(frame[384, 240]) == r.GOAL_MARK_COLOR
+    assert not np.any(np.all(frame == np.array(r.GOAL_COLOR, dtype=np.uint8), axis=-1))
+
+
+def test_crossing_scene_has_no_walls_and_zooms():
+    from socnav_wm.env.episode import Episode
+    from socnav_wm.env.params import EnvParams
+    from socnav_wm.env.render import episode_scene
+
+    params = EnvParams(
+        scenario="circle_crossing",
+        room_size=40.0,
+        crossing_radius=4.0,
+        crossing_noise=0.5,
+        goal_radius=0.0,
+        human_radius=0.3,
+    )
+    episode = Episode(
+        scenario_id=0,
+        robot_xy=np.array([[0.0, -4.0]]),
+        robot_theta=np.array([math.pi / 2]),
+        goal_xy=np.array([0.0, 4.0]),
+        human_xy=np.array([[[4.0, 0.0], [-4.0, 0.0], [0.0, 4.2]]]),
+        human_theta=np.zeros((1, 3)),
+        actions=np.zeros(0),
+        rewards=np.zeros(0),
+        dmin=np.zeros(0),
+        success=False,
+        collision=None,
+        truncated=False,
+    )
+    frame = render_frame(episode_scene(episode, 0, params))
+    # The image spans ±(4 + 0.5 + 1.5) = ±6 m at 40 px/m: no wall band, the corner is floor.
+    assert tuple(frame[0, 0]) == r.BACKGROUND_COLOR
+    assert tuple(frame[479, 479]) == r.BACKGROUND_COLOR
+    # Human 0 at (4, 0) -> col 400, row 240; the robot at (0, -4) -> col 240, row 400.
+    assert tuple(frame[240, 400]) == r.HUMAN_COLOR
+    assert tuple(frame[400, 240]) == r.ROBOT_COLOR
+
+
+def test_episodes_carry_their_obstacles():
+    from pathlib import Path
+
+    from socnav_wm.config import load_params
+    from socnav_wm.env.core import Simulator
+    from socnav_wm.env.render import episode_frames
+    from socnav_wm.env.rollout import random_policy, run_episodes
+
+    root = Path(__file__).resolve().parents[2]
+    params = load_params(
+        root / "params.yaml", overlays=[root / "configs" / "scenarios" / "obstacles.yaml"]
+    ).env.replace(max_steps=2)
+    ids = np.array([0, 3])
+    episodes = run_episodes(params, random_policy(0), 0, ids)
+    sim = Simulator(len(ids), params)
+    sim.reset(seed=0, scenario_ids=ids)
+    for e, episode in enumerate(episodes):
+        np.testing.assert_array_equal(episode.obstacle_kind, sim.state.obstacle_kind[e])
+        np.testing.assert_array_equal(episode.obstacle_xy, sim.state.obstacle_xy[e])
+        np.testing.assert_array_equal(episode.obstacle_half, sim.state.obstacle_half[e])
+    frame = episode_frames(episodes[0], params, size=96)[0]
+    assert np.any(np.all(frame == np.array(r.TABLE_COLOR, dtype=np.uint8), axis=-1))
+    # The paper's room has no obstacles: none recorded.
+    paper = run_episodes(params.replace(tables=(0, 0), plants=(0, 0)), random_policy(0), 0, ids)
+    assert paper[0].obstacle_kind is None and paper[0].obstacle_xy is None
