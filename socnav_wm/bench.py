@@ -126,8 +126,8 @@ def bench_env(
     of the paper's scenario, or, given ``scenarios`` (name → EnvParams fields: a preset), per
     scenario.
     """
+    presets = scenarios is not None
     if scenarios is None:
-        scenarios = {"paper": {}}
         runs = [("paper", {"human_policy": policy}) for policy in policies]
     else:
         runs = list(scenarios.items())
@@ -147,17 +147,17 @@ def bench_env(
                     step()
                 env.close()
 
-            rows.append(
-                {
+            row = {"humans": options.get("human_policy", "mixed"), "batch": n}
+            if presets:  # a preset: its name and obstacles instead of the interface
+                row = {
                     "scenario": name,
-                    "humans": options.get("human_policy", "mixed"),
+                    **row,
                     "obstacles": _count_range(options, "tables", "plants"),
-                    "batch": n,
-                    "interface": "gym.make" if n == 1 else "gym.make_vec",
-                    "steps_per_cpu_s": rate,
-                    "peak_mb": _peak_bytes(lifecycle) / 2**20,
                 }
-            )
+            else:
+                row["interface"] = "gym.make" if n == 1 else "gym.make_vec"
+            row |= {"steps_per_cpu_s": rate, "peak_mb": _peak_bytes(lifecycle) / 2**20}
+            rows.append(row)
     return rows
 
 

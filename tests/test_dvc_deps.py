@@ -137,9 +137,12 @@ def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: 
                 if name in stale:
                     stale[name].add(stage.removeprefix("dvc.yaml:"))
     assert stale["socnav_wm/env/render.py"] == {"report"}
+    robots = {stage for stage in status if stage.startswith("scenarios/dvc.yaml:scenario_robots@")}
+    assert len(robots) == 2 * len(list((ROOT / "configs/scenarios").glob("*.yaml")))
     assert stale["socnav_wm/agents/baselines.py"] == {
         "evaluate_baseline@orca",
         "evaluate_baseline@sfm",
+        *robots,
     }
     runs_the_simulator = {"collect", "evaluate_baseline@orca", "evaluate_planner@cv-mpc"}
     agents = {stage for stage in status if stage.startswith("train_agent@")}

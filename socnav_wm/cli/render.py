@@ -61,7 +61,8 @@ def render(
     import numpy as np
 
     from socnav_wm.env.core import MAX_SCENARIO_ID
-    from socnav_wm.env.render import episode_frames, write_gif
+    from socnav_wm.env.frames import write_gif
+    from socnav_wm.env.render import episode_frames
     from socnav_wm.env.rollout import random_policy, run_episodes
 
     for scenario_id in scenario or ():

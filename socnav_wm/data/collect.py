@@ -20,8 +20,8 @@ import numpy as np
 from socnav_wm.data.compatibility import made_with
 from socnav_wm.data.shards import ShardWriter
 from socnav_wm.env.core import NUM_ACTIONS, Simulator
+from socnav_wm.env.draws import uniform
 from socnav_wm.env.params import EnvParams
-from socnav_wm.env.scenario import uniform
 from socnav_wm.env.state import COLLISION_NONE
 
 STREAM_RANDOM_POLICY = 100

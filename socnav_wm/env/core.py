@@ -20,6 +20,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from socnav_wm.env.crossing import spawn_crossing
 from socnav_wm.env.geometry import norm
 from socnav_wm.env.humans import HumanDynamics
 from socnav_wm.env.observation import observation_size, observe
@@ -31,13 +32,7 @@ from socnav_wm.env.reward import (
     compute_reward,
     point_to_segment_distance,
 )
-from socnav_wm.env.scenario import (
-    FAMILY_CODES,
-    POLICY_CODES,
-    SEES_CODES,
-    spawn,
-    spawn_crossing,
-)
+from socnav_wm.env.scenario import FAMILY_CODES, POLICY_CODES, SEES_CODES, spawn
 from socnav_wm.env.state import (
     COLLISION_HUMAN,
     COLLISION_NONE,

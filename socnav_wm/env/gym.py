@@ -157,24 +157,23 @@ def _single_info(info: dict[str, np.ndarray]) -> dict[str, Any]:
 
 def scene_of(sim: Simulator, env: int, trail: np.ndarray | None = None, title: str = ""):
     """The ``render.Scene`` of slot ``env`` of a simulator."""
-    from socnav_wm.env.render import Scene
+    from socnav_wm.env.render import Scene, scene_options
 
-    p = sim.params
     s = sim.state
+    obstacles = s.obstacle_kind.shape[1] > 0
     return Scene(
         robot_xy=s.robot_xy[env].copy(),
         robot_theta=float(s.robot_theta[env]),
-        robot_radius=p.robot_radius,
         goal_xy=s.goal_xy[env].copy(),
-        goal_radius=p.goal_radius,
         human_xy=s.human_xy[env].copy(),
         human_theta=s.human_theta()[env],
-        human_radius=p.human_radius,
-        personal_space=0.5,
-        room_half_size=p.wall_half_size,
-        wall_thickness=p.wall_thickness,
         robot_trail=trail,
         title=title,
+        obstacle_kind=s.obstacle_kind[env].copy() if obstacles else None,
+        obstacle_xy=s.obstacle_xy[env].copy() if obstacles else None,
+        obstacle_half=s.obstacle_half[env].copy() if obstacles else None,
+        human_group=s.human_group[env].copy(),
+        **scene_options(sim.params),
     )
 
 
@@ -246,7 +245,8 @@ class SocNavVectorEnv(VectorEnv):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
-        from socnav_wm.env.render import render_frame, tile_frames
+        from socnav_wm.env.frames import tile_frames
+        from socnav_wm.env.render import render_frame
 
         frames = [render_frame(scene_of(self.sim, e)) for e in range(min(self.num_envs, 16))]
         return tile_frames(frames, columns=4)

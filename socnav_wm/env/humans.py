@@ -14,7 +14,9 @@ import numba
 import numpy as np
 
 from socnav_wm.env import orca
+from socnav_wm.env.draws import STREAM_AVOID_ROBOT, uniform
 from socnav_wm.env.geometry import norm
+from socnav_wm.env.groups import group_pull
 from socnav_wm.env.obstacles import nearest_point, polygon_sizes, polygons, push_out
 from socnav_wm.env.params import PAPER_SFM_SEES_ROBOT, EnvParams
 from socnav_wm.env.scenario import (
@@ -24,9 +26,7 @@ from socnav_wm.env.scenario import (
     SEES_ALWAYS,
     SEES_CODES,
     SEES_PAPER,
-    STREAM_AVOID_ROBOT,
     redraw_human_goal,
-    uniform,
 )
 from socnav_wm.env.state import OBSTACLE_NONE, BatchState
 
@@ -42,45 +42,6 @@ def _wall_push(gap: float, r0: float) -> float:
     """exp(−gap/r0), the paper's obstacle repulsion, skipped where it underflows."""
     x = gap / r0
     return math.exp(-x) if x < _EXP_CUTOFF else 0.0
-
-
-@numba.njit(cache=True, error_model="numpy")
-def group_pull(
-    human_xy: np.ndarray,
-    human_group: np.ndarray,
-    group_leader: np.ndarray,
-    group_standing: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """(N, H, 2) unit vectors drawing each walking-group member back to its group's centre
-    when farther than (n − 1)/2 m from it (Moussaïd et al. 2010's cohesion threshold for a
-    group of n); zero otherwise and for everyone else."""
-    num_envs, num_humans = human_group.shape
-    out[:] = 0.0
-    for e in range(num_envs):
-        for g in range(group_leader.shape[1]):
-            if group_leader[e, g] < 0 or group_standing[e, g]:
-                continue
-            cx = 0.0
-            cy = 0.0
-            n = 0
-            for h in range(num_humans):
-                if human_group[e, h] == g:
-                    cx += human_xy[e, h, 0]
-                    cy += human_xy[e, h, 1]
-                    n += 1
-            cx /= n
-            cy /= n
-            threshold = 0.5 * (n - 1)
-            for h in range(num_humans):
-                if human_group[e, h] != g:
-                    continue
-                dx = cx - human_xy[e, h, 0]
-                dy = cy - human_xy[e, h, 1]
-                d = norm(dx, dy)
-                if d > threshold:
-                    out[e, h, 0] = dx / d
-                    out[e, h, 1] = dy / d
 
 
 @numba.njit(cache=True, error_model="numpy")

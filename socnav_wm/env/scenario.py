@@ -49,24 +49,24 @@ import math
 import numba
 import numpy as np
 
-from socnav_wm.env.geometry import norm
+from socnav_wm.env.draws import (
+    MAX_GOAL_ATTEMPTS,
+    MAX_SPAWN_ATTEMPTS,
+    STREAM_HUMAN,
+    STREAM_HUMAN_GOAL,
+    STREAM_HUMAN_POLICY,
+    STREAM_HUMAN_TRAITS,
+    STREAM_OBSTACLE,
+    STREAM_ROBOT,
+    STREAM_ROBOT_GOAL,
+    count_in_range,
+    discs_touch,
+    touches_wall,
+    uniform,
+)
+from socnav_wm.env.groups import assign_groups, place_group_member
 from socnav_wm.env.obstacles import disc_clearance
 from socnav_wm.env.state import OBSTACLE_NONE, OBSTACLE_PLANT, OBSTACLE_TABLE
-
-# Streams: which quantity a draw is for. Changing these values changes every scenario.
-STREAM_ROBOT = 1  # robot position (i = 0, j = attempt) and heading (i = 1)
-STREAM_ROBOT_GOAL = 2  # robot goal (i = attempt)
-STREAM_HUMAN = 3  # human position (i = human, j = attempt), speed, heading
-STREAM_HUMAN_GOAL = 4  # human goal (i = human, j = goal index, k = 2·attempt + coordinate)
-STREAM_HUMAN_POLICY = 5  # SFM or ORCA per human (i = human)
-STREAM_AVOID_ROBOT = 6  # SFM human sees the robot this step (i = human, j = step)
-STREAM_OBSTACLE = 7  # obstacle counts (i = 0, j = kind) and positions (i = slot, j = attempt)
-STREAM_HUMAN_TRAITS = (
-    8  # a human's speed (i = human, j = 0) and whether it ignores the robot (j = 1)
-)
-STREAM_CROSSING = 9  # crossing families: start (i = human, j = attempt) and goal draws
-STREAM_GROUPS = 10  # group counts (i = 0, j = kind), sizes (i = slot + 1) and placements
-STANDING_GAP = 0.15  # m between neighbours of a standing group, surface to surface
 
 FAMILY_CODES = {"room": 0, "circle_crossing": 1, "square_crossing": 2}
 SEES_PAPER = 0  # humans_see_robot: paper
@@ -78,43 +78,8 @@ POLICY_SFM = 0
 POLICY_ORCA = 1
 POLICY_CODES = {"sfm": POLICY_SFM, "orca": POLICY_ORCA}
 
-MAX_SPAWN_ATTEMPTS = 10_000  # attempts per disc at reset (then the reset is an error)
 OBSTACLE_GAP = 2.0  # obstacles keep this many human radii from each other and from the walls
-MAX_GOAL_ATTEMPTS = 1_000  # attempts per human-goal redraw during an episode (then: keep the goal)
 _KINEMATICS = MAX_SPAWN_ATTEMPTS  # j index of a human's initial speed/heading draws
-
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
-_MIX2 = np.uint64(0x94D049BB133111EB)
-
-
-@numba.njit(cache=True, inline="always")
-def _splitmix64(x: np.uint64) -> np.uint64:
-    z = x + _GOLDEN
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return z ^ (z >> np.uint64(31))
-
-
-@numba.njit(cache=True, inline="always")
-def uniform(seed: int, scenario: int, stream: int, i: int, j: int, k: int) -> float:
-    """A uniform number in [0, 1) keyed by its coordinates: same key, same number, always."""
-    h = _splitmix64(np.uint64(seed))
-    h = _splitmix64(h ^ np.uint64(scenario))
-    h = _splitmix64(h ^ np.uint64(stream))
-    h = _splitmix64(h ^ np.uint64(i))
-    h = _splitmix64(h ^ np.uint64(j))
-    h = _splitmix64(h ^ np.uint64(k))
-    return float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
-
-
-@numba.njit(cache=True, error_model="numpy")
-def uniform_array(seed: int, scenario: np.ndarray, stream: int, i: int, j: int, k: int):
-    """`uniform` for an array of scenario ids (used by tests and by numpy-side code)."""
-    out = np.empty(scenario.shape[0])
-    for n in range(scenario.shape[0]):
-        out[n] = uniform(seed, scenario[n], stream, i, j, k)
-    return out
 
 
 @numba.njit(cache=True, inline="always")
@@ -128,18 +93,6 @@ def draw_human_goal(
     ux = uniform(seed, scenario, STREAM_HUMAN_GOAL, human, goal_index, 2 * attempt)
     uy = uniform(seed, scenario, STREAM_HUMAN_GOAL, human, goal_index, 2 * attempt + 1)
     return (2.0 * ux - 1.0) * half, (2.0 * uy - 1.0) * half
-
-
-@numba.njit(cache=True, inline="always")
-def touches_wall(x: float, y: float, radius: float, wall_half: float) -> bool:
-    """Whether a disc touches a wall: the walls' inner faces are at ``±wall_half``."""
-    return abs(x) + radius >= wall_half or abs(y) + radius >= wall_half
-
-
-@numba.njit(cache=True, inline="always")
-def _discs_touch(x: float, y: float, ox: float, oy: float, gap: float) -> bool:
-    """Whether two discs whose radii add up to ``gap`` touch (shapely's ``intersects``)."""
-    return norm(x - ox, y - oy) <= gap
 
 
 @numba.njit(cache=True)
@@ -169,25 +122,18 @@ def human_goal_is_free(
         return False
     if disc_clearance(e, gx, gy, goal_radius, obstacle_kind, obstacle_xy, obstacle_half) <= 0.0:
         return False
-    if _discs_touch(gx, gy, robot_xy[e, 0], robot_xy[e, 1], goal_radius + robot_radius):
+    if discs_touch(gx, gy, robot_xy[e, 0], robot_xy[e, 1], goal_radius + robot_radius):
         return False
     for h in range(human_xy.shape[1]):
-        if _discs_touch(gx, gy, human_xy[e, h, 0], human_xy[e, h, 1], goal_radius + human_radius):
+        if discs_touch(gx, gy, human_xy[e, h, 0], human_xy[e, h, 1], goal_radius + human_radius):
             return False
     for j in range(num_goals):
-        if _discs_touch(gx, gy, human_goal[e, j, 0], human_goal[e, j, 1], 2.0 * goal_radius):
+        if discs_touch(gx, gy, human_goal[e, j, 0], human_goal[e, j, 1], 2.0 * goal_radius):
             return False
     robot_goal_gap = goal_radius + robot_goal_radius
-    return not with_robot_goal or not _discs_touch(
+    return not with_robot_goal or not discs_touch(
         gx, gy, robot_goal_xy[e, 0], robot_goal_xy[e, 1], robot_goal_gap
     )
-
-
-@numba.njit(cache=True)
-def _count(seed: int, scenario: int, kind: int, low: int, high: int) -> int:
-    """How many obstacles of ``kind`` a scenario has: uniform in [low, high]."""
-    u = uniform(seed, scenario, STREAM_OBSTACLE, 0, kind, 0)
-    return low + min(high - low, int(u * (high - low + 1)))
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -217,7 +163,11 @@ def spawn_obstacles(
         reach = math.sqrt(hx * hx + hy * hy) if which == 0 else plant_radius
         span_x = wall_half - gap - hx
         span_y = wall_half - gap - hy
-        for _ in range(_count(seed, s, which, counts[2 * which], counts[2 * which + 1])):
+        for _ in range(
+            count_in_range(
+                seed, s, STREAM_OBSTACLE, which, counts[2 * which], counts[2 * which + 1]
+            )
+        ):
             placed = False
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 cx = (2.0 * uniform(seed, s, STREAM_OBSTACLE, slot + 1, attempt, 0) - 1.0) * span_x
@@ -227,7 +177,7 @@ def spawn_obstacles(
                     other_reach = math.sqrt(half[e, other, 0] ** 2 + half[e, other, 1] ** 2)
                     if kind[e, other] == OBSTACLE_PLANT:
                         other_reach = half[e, other, 0]
-                    if ok and _discs_touch(cx, cy, xy[e, other, 0], xy[e, other, 1],
+                    if ok and discs_touch(cx, cy, xy[e, other, 0], xy[e, other, 1],
                                            reach + other_reach + gap):  # fmt: skip
                         ok = False
                 if ok:
@@ -246,134 +196,7 @@ def spawn_obstacles(
 
 
 @numba.njit(cache=True, error_model="numpy")
-def assign_groups(
-    e: int,
-    seed: int,
-    s: int,
-    num_humans: int,
-    counts: np.ndarray,
-    sizes: np.ndarray,
-    human_group: np.ndarray,
-    group_leader: np.ndarray,
-    group_standing: np.ndarray,
-) -> None:
-    """Scenario ``s``'s groups in slot ``e``: a count of walking then of standing groups
-    (``counts``: [low, high] of each), each of a size drawn in ``sizes``; members take the
-    humans in index order (the first leads), the humans left over walk alone."""
-    human_group[e, :] = -1
-    group_leader[e, :] = -1
-    group_standing[e, :] = False
-    taken = 0
-    slot = 0
-    for kind in range(2):
-        low = counts[2 * kind]
-        high = counts[2 * kind + 1]
-        u = uniform(seed, s, STREAM_GROUPS, 0, kind, 0)
-        count = low + min(high - low, int(u * (high - low + 1)))
-        for _ in range(count):
-            u = uniform(seed, s, STREAM_GROUPS, slot + 1, 0, 0)
-            size = sizes[0] + min(sizes[1] - sizes[0], int(u * (sizes[1] - sizes[0] + 1)))
-            size = min(size, num_humans - taken)
-            if size < 2:
-                return
-            group_leader[e, slot] = taken
-            group_standing[e, slot] = kind == 1
-            for m in range(size):
-                human_group[e, taken + m] = slot
-            taken += size
-            slot += 1
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _disc_is_free(
-    e: int,
-    h: int,
-    x: float,
-    y: float,
-    wall_half: float,
-    robot_xy: np.ndarray,
-    robot_radius: float,
-    human_xy: np.ndarray,
-    human_radius: float,
-    obstacle_kind: np.ndarray,
-    obstacle_xy: np.ndarray,
-    obstacle_half: np.ndarray,
-) -> bool:
-    """Whether human ``h`` fits at (x, y): off the walls, the obstacles, the robot and the
-    humans placed before it (indices below ``h``)."""
-    if touches_wall(x, y, human_radius, wall_half):
-        return False
-    if _discs_touch(x, y, robot_xy[e, 0], robot_xy[e, 1], robot_radius + human_radius):
-        return False
-    if disc_clearance(e, x, y, human_radius, obstacle_kind, obstacle_xy, obstacle_half) <= 0.0:
-        return False
-    for other in range(h):
-        if _discs_touch(x, y, human_xy[e, other, 0], human_xy[e, other, 1], 2.0 * human_radius):
-            return False
-    return True
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _place_group_member(
-    e: int, seed: int, s: int, h: int, half: float, wall_half: float, robot_xy: np.ndarray,
-    robot_radius: float, human_xy: np.ndarray, human_radius: float, human_group: np.ndarray,
-    group_leader: np.ndarray, group_standing: np.ndarray, human_heading: np.ndarray,
-    obstacle_kind: np.ndarray, obstacle_xy: np.ndarray, obstacle_half: np.ndarray,
-) -> bool:  # fmt: skip
-    """Place human ``h`` of a group: a walking member beside its leader (0–0.5 m apart,
-    farther only when that is full; facing the leader's way); a standing group's leader places
-    the whole circle (members facing its centre), its other members are then already placed.
-    False: no place found."""
-    g = human_group[e, h]
-    leader = group_leader[e, g]
-    if group_standing[e, g]:
-        if h != leader:
-            return True
-        size = 0
-        for j in range(human_group.shape[1]):
-            if human_group[e, j] == g:
-                size += 1
-        ring = (human_radius + 0.5 * STANDING_GAP) / math.sin(math.pi / size)
-        for attempt in range(MAX_SPAWN_ATTEMPTS):
-            cx = (2.0 * uniform(seed, s, STREAM_GROUPS, h, attempt, 0) - 1.0) * half
-            cy = (2.0 * uniform(seed, s, STREAM_GROUPS, h, attempt, 1) - 1.0) * half
-            turn = uniform(seed, s, STREAM_GROUPS, h, attempt, 2) * 2.0 * math.pi
-            ok = True
-            for m in range(size):
-                angle = turn + 2.0 * math.pi * m / size
-                x = cx + ring * math.cos(angle)
-                y = cy + ring * math.sin(angle)
-                if not _disc_is_free(e, h + m, x, y, wall_half, robot_xy, robot_radius,
-                                     human_xy, human_radius, obstacle_kind, obstacle_xy,
-                                     obstacle_half):  # fmt: skip
-                    ok = False
-                    break
-                human_xy[e, h + m, 0] = x
-                human_xy[e, h + m, 1] = y
-                human_heading[e, h + m, 0] = -math.cos(angle)
-                human_heading[e, h + m, 1] = -math.sin(angle)
-            if ok:
-                return True
-        return False
-    for attempt in range(MAX_SPAWN_ATTEMPTS):
-        angle = uniform(seed, s, STREAM_GROUPS, h, attempt, 0) * 2.0 * math.pi
-        # Within 0.5 m of the leader first; farther as attempts fail (a leader near a corner).
-        reach = min(0.5 + 0.01 * attempt, 4.0 * half)
-        gap = 2.0 * human_radius + reach * uniform(seed, s, STREAM_GROUPS, h, attempt, 1)
-        x = human_xy[e, leader, 0] + gap * math.cos(angle)
-        y = human_xy[e, leader, 1] + gap * math.sin(angle)
-        if _disc_is_free(e, h, x, y, wall_half, robot_xy, robot_radius, human_xy, human_radius,
-                         obstacle_kind, obstacle_xy, obstacle_half):  # fmt: skip
-            human_xy[e, h, 0] = x
-            human_xy[e, h, 1] = y
-            human_heading[e, h, 0] = human_heading[e, leader, 0]
-            human_heading[e, h, 1] = human_heading[e, leader, 1]
-            return True
-    return False
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _human_traits(
+def human_traits(
     e: int,
     seed: int,
     s: int,
@@ -492,14 +315,14 @@ def spawn(
             assign_groups(e, seed, s, num_humans, group_counts, group_sizes, human_group,
                           group_leader, group_standing)  # fmt: skip
         for h in range(num_humans):
-            _human_traits(
+            human_traits(
                 e, seed, s, h, policy_mode, human_max_speed, speed_range, sees_mode, ignore_prob,
                 human_max_speeds, human_policy, human_sees_robot,
             )  # fmt: skip
             heading = (2.0 * uniform(seed, s, STREAM_HUMAN, h, _KINEMATICS, 1) - 1.0) * math.pi
             group = human_group[e, h]
             if group >= 0 and (group_standing[e, group] or group_leader[e, group] != h):
-                if not _place_group_member(
+                if not place_group_member(
                     e, seed, s, h, half, wall_half, robot_xy, robot_radius, human_xy,
                     human_radius, human_group, group_leader, group_standing, human_heading,
                     obstacle_kind, obstacle_xy, obstacle_half,
@@ -514,7 +337,7 @@ def spawn(
             for attempt in range(MAX_SPAWN_ATTEMPTS):
                 hx = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 0) - 1.0) * half
                 hy = (2.0 * uniform(seed, s, STREAM_HUMAN, h, attempt, 1) - 1.0) * half
-                ok = not touches_wall(hx, hy, human_radius, wall_half) and not _discs_touch(
+                ok = not touches_wall(hx, hy, human_radius, wall_half) and not discs_touch(
                     hx, hy, robot_xy[e, 0], robot_xy[e, 1], robot_radius + human_radius
                 )
                 ok = (
@@ -525,7 +348,7 @@ def spawn(
                     > 0.0
                 )
                 for other in range(h):
-                    if ok and _discs_touch(
+                    if ok and discs_touch(
                         hx, hy, human_xy[e, other, 0], human_xy[e, other, 1], 2.0 * human_radius
                     ):
                         ok = False
@@ -574,7 +397,7 @@ def spawn(
         for attempt in range(MAX_SPAWN_ATTEMPTS):
             gx = (2.0 * uniform(seed, s, STREAM_ROBOT_GOAL, attempt, 0, 0) - 1.0) * half
             gy = (2.0 * uniform(seed, s, STREAM_ROBOT_GOAL, attempt, 0, 1) - 1.0) * half
-            ok = not touches_wall(gx, gy, goal_radius, wall_half) and not _discs_touch(
+            ok = not touches_wall(gx, gy, goal_radius, wall_half) and not discs_touch(
                 gx, gy, robot_xy[e, 0], robot_xy[e, 1], robot_gap
             )
             ok = (
@@ -588,8 +411,8 @@ def spawn(
             goal_gap = goal_radius + human_goal_radius
             for h in range(num_humans):
                 if ok and (
-                    _discs_touch(gx, gy, human_xy[e, h, 0], human_xy[e, h, 1], human_gap)
-                    or _discs_touch(gx, gy, human_goal[e, h, 0], human_goal[e, h, 1], goal_gap)
+                    discs_touch(gx, gy, human_xy[e, h, 0], human_xy[e, h, 1], human_gap)
+                    or discs_touch(gx, gy, human_goal[e, h, 0], human_goal[e, h, 1], goal_gap)
                 ):
                     ok = False
             if ok:
@@ -599,110 +422,6 @@ def spawn(
             failures += 1
         goal_xy[e, 0] = gx
         goal_xy[e, 1] = gy
-    return failures
-
-
-@numba.njit(cache=True, error_model="numpy")
-def spawn_crossing(
-    envs: np.ndarray,
-    seed: int,
-    scenario_ids: np.ndarray,
-    policy_mode: int,
-    family: int,
-    radius: float,
-    noise: float,
-    robot_radius: float,
-    human_radius: float,
-    human_max_speed: float,
-    discomfort: float,
-    speed_range: np.ndarray,
-    sees_mode: int,
-    ignore_prob: float,
-    robot_xy: np.ndarray,
-    robot_theta: np.ndarray,
-    goal_xy: np.ndarray,
-    human_xy: np.ndarray,
-    human_heading: np.ndarray,
-    human_speed: np.ndarray,
-    human_goal: np.ndarray,
-    human_goal_index: np.ndarray,
-    human_policy: np.ndarray,
-    human_max_speeds: np.ndarray,
-    human_sees_robot: np.ndarray,
-) -> int:
-    """CrowdNav's crossing scenarios (``circle_crossing``: family 1, ``square_crossing``: 2).
-
-    The robot starts at (0, −R) facing +y, its goal at (0, R). Each human in turn:
-
-    - circle: at angle U·2π on the circle of radius R, moved by up to ±``noise`` in x and y;
-      its goal is the opposite point (the start mirrored through the centre);
-    - square: on a random side x = ±U·R, y uniform in ±R; its goal on the other side, drawn
-      the same way;
-
-    redrawn while its start is within ``2·human_radius + discomfort`` (robot: its radius
-    instead of one human radius) of the robot's start, an earlier human's start or goal, or
-    (circle) its goal is as close to theirs. Humans start at rest, facing their goal.
-    """
-    num_humans = human_xy.shape[1]
-    failures = 0
-    for n in range(envs.shape[0]):
-        e = envs[n]
-        s = scenario_ids[n]
-        robot_xy[e, 0] = 0.0
-        robot_xy[e, 1] = -radius
-        robot_theta[e] = 0.5 * math.pi
-        goal_xy[e, 0] = 0.0
-        goal_xy[e, 1] = radius
-        for h in range(num_humans):
-            _human_traits(
-                e, seed, s, h, policy_mode, human_max_speed, speed_range, sees_mode, ignore_prob,
-                human_max_speeds, human_policy, human_sees_robot,
-            )  # fmt: skip
-            placed = False
-            px = py = gx = gy = 0.0
-            for attempt in range(MAX_SPAWN_ATTEMPTS):
-                u0 = uniform(seed, s, STREAM_CROSSING, h, attempt, 0)
-                u1 = uniform(seed, s, STREAM_CROSSING, h, attempt, 1)
-                u2 = uniform(seed, s, STREAM_CROSSING, h, attempt, 2)
-                if family == 1:
-                    angle = u0 * 2.0 * math.pi
-                    px = radius * math.cos(angle) + (2.0 * u1 - 1.0) * noise
-                    py = radius * math.sin(angle) + (2.0 * u2 - 1.0) * noise
-                    gx = -px
-                    gy = -py
-                else:
-                    side = 1.0 if u0 > 0.5 else -1.0
-                    px = u1 * radius * side
-                    py = (2.0 * u2 - 1.0) * radius
-                    gx = uniform(seed, s, STREAM_CROSSING, h, attempt, 3) * radius * -side
-                    gy = (2.0 * uniform(seed, s, STREAM_CROSSING, h, attempt, 4) - 1.0) * radius
-                gap = human_radius + robot_radius + discomfort
-                ok = norm(px - robot_xy[e, 0], py - robot_xy[e, 1]) >= gap
-                ok = ok and norm(gx - goal_xy[e, 0], gy - goal_xy[e, 1]) >= gap
-                gap = 2.0 * human_radius + discomfort
-                for other in range(h):
-                    if not ok:
-                        break
-                    ox = human_xy[e, other, 0]
-                    oy = human_xy[e, other, 1]
-                    qx = human_goal[e, other, 0]
-                    qy = human_goal[e, other, 1]
-                    ok = norm(px - ox, py - oy) >= gap and norm(px - qx, py - qy) >= gap
-                    ok = ok and norm(gx - qx, gy - qy) >= gap and norm(gx - ox, gy - oy) >= gap
-                if ok:
-                    placed = True
-                    break
-            if not placed:
-                failures += 1
-            human_xy[e, h, 0] = px
-            human_xy[e, h, 1] = py
-            human_goal[e, h, 0] = gx
-            human_goal[e, h, 1] = gy
-            human_goal_index[e, h] = 0
-            human_speed[e, h] = 0.0
-            d = norm(gx - px, gy - py)
-            human_heading[e, h, 0] = (gx - px) / d if d > 0.0 else 1.0
-            human_heading[e, h, 1] = (gy - py) / d if d > 0.0 else 0.0
     return failures
 
 

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from socnav_wm.env.episode import Episode
+from socnav_wm.env.frames import tile_frames, write_gif
 from socnav_wm.env.params import EnvParams
-from socnav_wm.env.render import episode_scene, render_frame, tile_frames, write_gif
+from socnav_wm.env.render import episode_scene, render_frame
 
 
 def _outcome_text(episode: Episode) -> str:

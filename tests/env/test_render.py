@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from socnav_wm.env import frames as frames_module
 from socnav_wm.env import render as r
-from socnav_wm.env.render import Scene, render_frame, tile_frames, write_gif
+from socnav_wm.env.frames import tile_frames, write_gif
+from socnav_wm.env.render import Scene, render_frame
 
 
 def make_scene(**overrides) -> Scene:
@@ -197,7 +199,7 @@ def test_palette_maps_unsampled_colour_to_nearest():
     frames = [np.full((4, 4, 3), 255, np.uint8) for _ in range(10)]
     frames[0][0, 0] = (0, 0, 0)
     frames[3][1, 1] = (20, 10, 5)  # frame 3 is not among the 2 sampled frames (0 and 9)
-    images = r._to_palette_images(frames, max_samples=2)
+    images = frames_module._to_palette_images(frames, max_samples=2)
     assert tuple(np.asarray(images[3].convert("RGB"))[1, 1]) == (0, 0, 0)
     assert tuple(np.asarray(images[3].convert("RGB"))[0, 0]) == (255, 255, 255)
 

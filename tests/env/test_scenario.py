@@ -6,13 +6,8 @@ import numpy as np
 import pytest
 
 from socnav_wm.env import EnvParams, Simulator
-from socnav_wm.env.scenario import (
-    MAX_GOAL_ATTEMPTS,
-    POLICY_ORCA,
-    POLICY_SFM,
-    redraw_human_goal,
-    uniform_array,
-)
+from socnav_wm.env.draws import MAX_GOAL_ATTEMPTS, uniform_array
+from socnav_wm.env.scenario import POLICY_ORCA, POLICY_SFM, redraw_human_goal
 
 NUM_RESETS = 10_000
 
