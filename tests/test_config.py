@@ -601,6 +601,7 @@ def test_stage_sections_follow_dvc_yaml() -> None:
     stages = {
         **yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"],
         **yaml.safe_load((ROOT / "studies" / "dvc.yaml").read_text())["stages"],
+        **yaml.safe_load((ROOT / "scenarios" / "dvc.yaml").read_text())["stages"],
     }
     sections = STAGE_SECTIONS
     assert set(sections) <= set(stages)

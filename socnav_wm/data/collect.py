@@ -138,6 +138,11 @@ def collect_rollouts(
     """
     if episodes < 1 or num_envs < 1:
         raise ValueError("episodes and num_envs must be >= 1")
+    if env_params.num_observed_humans != env_params.num_humans or env_params.observed_obstacles:
+        raise ValueError(
+            "env.observed_humans, env.observed_obstacles: rollouts hold every human in spawn "
+            "order and no obstacle (their schema); collect with the defaults"
+        )
     start = time.perf_counter()
     num_envs = min(num_envs, episodes)
     sim = Simulator(num_envs, env_params)

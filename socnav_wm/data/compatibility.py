@@ -21,6 +21,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from socnav_wm.data.schema import FEATURES_PER_HUMAN, GOAL_FEATURES, observation_dim
+from socnav_wm.env.observation import observation_size
 from socnav_wm.env.params import EnvParams
 
 __all__ = ["check_made_with", "made_with", "observation_record"]
@@ -41,6 +42,35 @@ def observation_record(obs_dim: int) -> dict[str, Any]:
 
 def _humans(count: int) -> str:
     return f"{count} human{'' if count == 1 else 's'}"
+
+
+def _check_scenario_kind(
+    path: str | os.PathLike[str],
+    made: Mapping[str, Any],
+    env_params: EnvParams,
+    verb: str,
+    error: type[ValueError],
+) -> None:
+    """Refuse a file made for another kind of scenario: another observation layout (K humans,
+    M obstacles), robot kinematics or scenario family, each named with both values."""
+    humans = int(made.get("num_humans", env_params.num_humans))
+    observed = made.get("observed_humans")
+    size = observation_size(
+        humans if observed is None else int(observed), int(made.get("observed_obstacles", 0))
+    )
+    ours = observation_size(env_params.num_observed_humans, env_params.observed_obstacles)
+    if size != ours:
+        raise error(
+            f"{path}: {verb} with {size}-d observations; the params give {ours}-d observations "
+            "(env.num_humans, env.observed_humans, env.observed_obstacles)"
+        )
+    for name in ("kinematics", "scenario"):
+        theirs = made.get(name, EnvParams.model_fields[name].default)
+        if theirs != getattr(env_params, name):
+            raise error(
+                f"{path}: {verb} with env.{name} {theirs}; the params have "
+                f"{getattr(env_params, name)}"
+            )
 
 
 def check_made_with(
@@ -73,6 +103,8 @@ def check_made_with(
         or other_goals
     )
     if not differs:
+        if "observed_humans" in made or "kinematics" in made or "scenario" in made:
+            _check_scenario_kind(path, made, env_params, verb, error)
         return
     ours = _humans(env_params.num_humans)
     if humans is not None:

@@ -40,6 +40,9 @@ the robot (as by a wall); the paper's ORCA humans never see it."""
 PACKING = 1 / 3
 """The share of the humans' square that the discs of the robot, the humans and their goals
 may cover (:attr:`EnvParams.most_humans`)."""
+OBSTACLE_PACKING = 0.5
+"""The share of the room inside the walls that the obstacles, each grown by its clearance, may
+cover: random placement jams near half."""
 OBSTACLE_CLEARANCE = 2.0
 """Obstacles are kept this many human radii apart from each other and from the walls, so that
 no pocket of the room is closed off."""
@@ -266,6 +269,13 @@ class EnvParams(Section):
 
     @model_validator(mode="after")
     def _fits_in_the_room(self) -> Self:
+        inner = (2 * self.wall_half_size) ** 2
+        if self.obstacle_area > OBSTACLE_PACKING * inner:
+            raise ValueError(
+                f"tables, plants: up to {self.max_obstacles} obstacles with their clearance "
+                f"cover {self.obstacle_area:.1f} m², more than half of the {inner:.1f} m² "
+                "inside the walls"
+            )
         if self.scenario != "room":
             most = self.most_crossing_humans
             if self.num_humans > most:

@@ -384,6 +384,11 @@ def train_residual(
     the first ones', decide alone; with 1 every step counts relative to constant velocity.
     Validation uses the plain mean (the metric). ``horizon``, ``stride`` and ``val_fraction``
     are the caller's (the samples are already made)."""
+    if env_params.kinematics != "unicycle":
+        raise ValueError(
+            "env.kinematics: the planning model imagines the unicycle robot's own motion; "
+            f"it cannot be trained for a {env_params.kinematics} robot"
+        )
     room, relative_weight = params.room, params.relative_weight
     torch.manual_seed(seed)
     model = build_trainable(

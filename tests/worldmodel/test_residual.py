@@ -50,8 +50,9 @@ def perturbed(seed: int = 0) -> residual.ResidualDynamics:
 def test_ego_advance_in_torch_equals_numpy_for_every_action() -> None:
     rng = np.random.default_rng(0)
     points, velocity = rng.normal(size=(4, 4, 2)), rng.normal(scale=0.1, size=(4, 4, 2))
-    v, w = commands_of(np.arange(4), ENV)
-    expected = advance(points, velocity, v, w, ENV.dt)
+    motion = commands_of(np.arange(4), ENV)
+    v, w = motion.v, motion.omega
+    expected = advance(points, velocity, motion, ENV.dt)
     got = residual.ego_advance(*(torch.from_numpy(x) for x in (points, velocity, v, w)), ENV.dt)
     for e, g in zip(expected, got, strict=True):
         np.testing.assert_allclose(g.numpy(), e, atol=1e-12)
@@ -202,7 +203,8 @@ def test_advance_pose_is_the_simulator_unicycle_for_every_action() -> None:
     sim = Simulator(4, ENV)
     sim.reset(seed=3, scenario_ids=np.arange(4))
     before = np.column_stack([sim.state.robot_xy, sim.state.robot_theta])
-    v, w = commands_of(np.arange(4), ENV)
+    motion = commands_of(np.arange(4), ENV)
+    v, w = motion.v, motion.omega
     sim.step(np.arange(4))
     after = residual.advance_pose(
         *(torch.from_numpy(np.asarray(x)) for x in (before, v, w)), ENV.dt
