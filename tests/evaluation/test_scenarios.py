@@ -1,0 +1,94 @@
+"""The per-preset table of the scenarios pipeline, on small synthetic evaluation files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from socnav_wm.config import Params
+from socnav_wm.evaluation.scenarios import GAP_POINTS, SCENARIO_METHODS, TABLE_METRICS
+from socnav_wm.stages import scenarios_report
+
+METRICS = [name for name, _ in TABLE_METRICS]
+
+
+def _summary(mean: float) -> dict[str, float]:
+    return {"mean": mean, "low": max(0.0, mean - 0.05), "high": min(1.0, mean + 0.05), "n": 200}
+
+
+def _write(root: Path, preset: str, method: str, success: np.ndarray) -> None:
+    metrics = {name: _summary(0.0) for name in METRICS}
+    metrics["success"] = _summary(float(success.mean()))
+    metrics["time_to_reach_goal"] = {"mean": 10.5, "low": 10.0, "high": 11.0, "n": 100}
+    folder = root / "metrics" / preset
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{method}.json").write_text(json.dumps({"method": method, "metrics": metrics}))
+    episodes = root / "data" / preset
+    episodes.mkdir(parents=True, exist_ok=True)
+    n = len(success)
+    table = pa.table(
+        {
+            "method": [method] * n,
+            "training_seed": np.full(n, -1, dtype=np.int64),
+            "scenario_id": np.arange(n, dtype=np.int64),
+            "success": success.astype(np.float64),
+        }
+    )
+    pq.write_table(table, episodes / f"{method}.parquet")
+
+
+def _run(root: Path, presets: tuple[str, ...], document: Path) -> str:
+    configs = root / "configs"
+    configs.mkdir(exist_ok=True)
+    for preset in presets:
+        (configs / f"{preset}.yaml").write_text("env: {}\n")
+    return scenarios_report.run(
+        Params(),
+        presets_dir=configs,
+        metrics_dir=root / "metrics",
+        episodes_dir=root / "data",
+        out=root / "scenarios.md",
+        summary=root / "summary.json",
+        documents=(document,),
+        tracking=False,
+    )
+
+
+def test_the_table_pairs_the_planners_and_names_the_presets_with_room(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    physics = (rng.random(200) < 0.8).astype(float)
+    better = physics.copy()
+    better[np.flatnonzero(physics == 0)[:30]] = 1.0  # the oracle saves 30 of cv-mpc's failures
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, better if method == "oracle-mpc" else physics)
+        _write(tmp_path, "easy", method, physics)
+    document = tmp_path / "doc.md"
+    document.write_text(
+        "intro\n<!-- socnav-wm:scenarios -->\nPLACEHOLDER\n<!-- /socnav-wm:scenarios -->\n"
+    )
+    line = _run(tmp_path, ("dense", "easy", "absent"), document)
+    assert "≥ 3 points in dense;" in line and "missing: absent/orca" in line
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["gaps"]["dense"]["difference"] == pytest.approx(15.0)
+    assert summary["gaps"]["dense"]["room"] and not summary["gaps"]["easy"]["room"]
+    assert summary["gaps"]["dense"]["difference"] >= GAP_POINTS
+    text = document.read_text()
+    assert "PLACEHOLDER" not in text and "| `dense` | `oracle-mpc` | 87.5 [82.5, 92.5]" in text
+    assert (tmp_path / "scenarios.md").read_text().count("| `easy` |") == len(SCENARIO_METHODS) + 1
+
+
+def test_no_evaluation_and_a_broken_file_are_refused_in_one_line(tmp_path: Path) -> None:
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    with pytest.raises(ValueError, match="no scenario evaluation found"):
+        _run(tmp_path, ("dense",), document)
+    (tmp_path / "metrics" / "dense").mkdir(parents=True)
+    (tmp_path / "metrics" / "dense" / "orca.json").write_text(json.dumps({"method": "orca"}))
+    with pytest.raises(ValueError, match="orca.json: not an evaluation's metrics file"):
+        _run(tmp_path, ("dense",), document)
+    assert not (tmp_path / "summary.json").exists()
