@@ -16,7 +16,7 @@ CORES := $(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
 JOBS ?= $(CORES)
 THREADS ?= $(shell j=$(JOBS); t=$$(( $(CORES) / (j > 0 ? j : 1) )); echo $$(( t > 0 ? t : 1 )))
 
-.PHONY: setup models run repro study test lint bench clean
+.PHONY: setup models run repro study scenarios test lint bench clean
 
 setup: $(STAMP)
 
@@ -75,6 +75,11 @@ repro:
 # with the studies' evidence (reports/studies/claims.md).
 study: $(STAMP)
 	PATH="$(CURDIR)/$(BIN):$$PATH" dvc repro studies/dvc.yaml
+
+# Every non-learning method on the test scenarios of every preset of configs/scenarios/
+# (scenarios/dvc.yaml), then their table (reports/scenarios.md, docs/scenarios.md).
+scenarios: $(STAMP)
+	PATH="$(CURDIR)/$(BIN):$$PATH" dvc repro scenarios/dvc.yaml
 
 test: $(STAMP)
 	$(BIN)/ruff check .
