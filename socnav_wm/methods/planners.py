@@ -22,6 +22,11 @@ def planner_policies(
     """Planner ``method.name`` (its ``planning.per_method`` entry applied) on a fresh
     ``model()`` for every batch of episodes."""
     resolved = planning.resolved(method.name)
+    if resolved.actions != "paper" and method.name != "cv-mpc":
+        raise ValueError(
+            f"planning.actions: {method.name}'s model imagines the paper's four actions; "
+            "a lattice is for cv-mpc and oracle-mpc"
+        )
 
     def fresh() -> tuple[Policy, bool]:
         from socnav_wm.planning.mpc import Planner

@@ -41,10 +41,51 @@ from socnav_wm.worldmodel.ego import advance_pose, commands_of
 STOP, FORWARD, LEFT, RIGHT = range(NUM_ACTIONS)
 
 
-def prefixes(length: int) -> np.ndarray:
-    """Every action sequence of ``length`` steps, (4**length, length) int64, in lexicographic
-    order (so the first is all ``stop``)."""
-    return np.array(list(itertools.product(range(NUM_ACTIONS), repeat=length)), dtype=np.int64)
+def prefixes(length: int, num_actions: int) -> np.ndarray:
+    """Every sequence of ``length`` actions out of ``num_actions``, (A**length, length) int64,
+    in lexicographic order (so the first is all action 0: ``stop``)."""
+    return np.array(list(itertools.product(range(num_actions), repeat=length)), dtype=np.int64)
+
+
+def command_table(params: PlanningParams, env_params: EnvParams) -> np.ndarray | None:
+    """The lattice's commands (A, 2), action ``a`` being row ``a`` (row 0 stops), or None for
+    the paper's four discrete actions. Unicycle: every speed of ``0, v/n, …, v`` with every turn
+    rate evenly in ``±ω``; holonomic: those speeds in every direction ``2πj/m`` (robot frame)."""
+    if params.actions == "paper":
+        return None
+    e = env_params
+    speeds = np.linspace(0.0, e.robot_max_speed, params.lattice_speeds + 1)
+    if e.kinematics == "holonomic":
+        angles = 2 * np.pi * np.arange(params.lattice_headings) / params.lattice_headings
+        v, a = np.meshgrid(speeds, angles, indexing="ij")
+        return np.stack((v * np.cos(a), v * np.sin(a)), axis=-1).reshape(-1, 2)
+    turns = np.linspace(-e.robot_max_rotation, e.robot_max_rotation, params.lattice_headings)
+    v, w = np.meshgrid(speeds, turns, indexing="ij")
+    table = np.stack((v, w), axis=-1).reshape(-1, 2)
+    # Stop first (ties go to the first candidate): in place of the slowest left turn when an
+    # even number of turn rates leaves no zero one.
+    stop = np.flatnonzero((table == 0).all(axis=1))
+    rest = np.delete(table, stop[0], axis=0) if stop.size else table[1:]
+    return np.vstack(([0.0, 0.0], rest))
+
+
+def continuation_commands(name: str, goal: np.ndarray, env_params: EnvParams) -> np.ndarray:
+    """A lattice planner's continuation ``name`` as commands (B, 2) for robot-frame goals
+    (B, 2): ``stop``; ``forward`` at full speed; ``goal``, full speed towards the goal
+    (holonomic) or turning towards it while advancing as far as the heading agrees (unicycle)."""
+    e = env_params
+    out = np.zeros((len(goal), 2))
+    if name == "forward":
+        out[:, 0] = e.robot_max_speed
+    elif name == "goal":
+        if e.kinematics == "holonomic":
+            length = np.hypot(goal[:, 0], goal[:, 1])[:, None]
+            np.divide(goal * e.robot_max_speed, length, out=out, where=length > 0)
+        else:
+            bearing = np.arctan2(goal[:, 1], goal[:, 0])
+            out[:, 0] = e.robot_max_speed * np.maximum(0.0, np.cos(bearing))
+            out[:, 1] = np.clip(bearing / e.dt, -e.robot_max_rotation, e.robot_max_rotation)
+    return out
 
 
 def towards_goal(goal: np.ndarray, env_params: EnvParams) -> np.ndarray:
@@ -61,17 +102,26 @@ def candidate_actions(
     k: int,
     goal: np.ndarray,
     env_params: EnvParams,
+    commands: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Step ``k``'s action of every future (B,), futures in candidate order repeated per
-    episode: the prefix's while ``k`` is within it, then the continuation's (``goal`` from the
-    futures' robot-frame goals (B, 2))."""
+    """Step ``k``'s action of every future, futures in candidate order repeated per episode:
+    the prefix's while ``k`` is within it, then the continuation's (``goal`` from the futures'
+    robot-frame goals (B, 2)). Discrete actions (B,), or with a lattice (``commands``, the
+    :func:`command_table`) continuous commands (B, 2)."""
     conts = len(continuations)
     batch = len(goal)
     candidates = len(prefix_table) * conts
     rows_of = np.arange(batch) % candidates
     if k < prefix_table.shape[1]:
-        return prefix_table[rows_of // conts, k]
+        index = prefix_table[rows_of // conts, k]
+        return index if commands is None else commands[index]
     continuation_of = rows_of % conts
+    if commands is not None:
+        out = np.empty((batch, 2))
+        for c, name in enumerate(continuations):
+            rows = continuation_of == c
+            out[rows] = continuation_commands(name, goal[rows], env_params)
+        return out
     actions = np.empty(batch, dtype=np.int64)
     for c, name in enumerate(continuations):
         rows = continuation_of == c
@@ -114,7 +164,8 @@ class Planner:
 
     def __init__(self, model: PlanningModel, params: PlanningParams, env_params: EnvParams):
         self.model, self.params, self.env_params = model, params, env_params
-        self.prefixes = prefixes(params.prefix_length)
+        self.commands = command_table(params, env_params)
+        self.prefixes = prefixes(params.prefix_length, params.num_actions)
         self.num_candidates = len(self.prefixes) * len(params.continuations)
 
     def scores(
@@ -144,7 +195,7 @@ class Planner:
             obstacles = tuple(np.repeat(a, s, axis=0) for a in obstacles)
             obstacle_limit = e.robot_radius + p.safety_margin
         for k in range(p.horizon):
-            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e)
+            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e, self.commands)
             predicted = rollout.step(actions)
             goal = predicted[:, 0]
             new_goal_distance = np.hypot(goal[:, 0], goal[:, 1])
@@ -178,7 +229,8 @@ class Planner:
         walls; ``obstacles``: the room's tables and plants)."""
         scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2], pose, obstacles)
         best = scores.argmax(axis=1)  # the first of equal scores
-        return self.prefixes[best // len(self.params.continuations), 0]
+        first = self.prefixes[best // len(self.params.continuations), 0]
+        return first if self.commands is None else self.commands[first]
 
     @property
     def reads_simulator(self) -> bool:

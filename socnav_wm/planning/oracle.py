@@ -22,7 +22,7 @@ import numpy as np
 from socnav_wm.env.core import Simulator
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_NONE, BatchState
-from socnav_wm.planning.mpc import candidate_actions, prefixes, step_gain
+from socnav_wm.planning.mpc import candidate_actions, command_table, prefixes, step_gain
 from socnav_wm.planning.params import PlanningParams
 
 
@@ -65,7 +65,8 @@ class OraclePlanner:
 
     def __init__(self, params: PlanningParams, env_params: EnvParams) -> None:
         self.params, self.env_params = params, env_params
-        self.prefixes = prefixes(params.prefix_length)
+        self.commands = command_table(params, env_params)
+        self.prefixes = prefixes(params.prefix_length, params.num_actions)
         self.num_candidates = len(self.prefixes) * len(params.continuations)
 
     def scores(self, sim: Simulator, envs: np.ndarray) -> np.ndarray:
@@ -81,7 +82,7 @@ class OraclePlanner:
         score = np.zeros(clone.num_envs)
         alive = ~state.done.copy()
         for k in range(p.horizon):
-            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e)
+            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e, self.commands)
             result = clone.step(actions)
             goal = robot_frame_goal(state)
             new_distance = np.hypot(*(state.goal_xy - state.robot_xy).T)
@@ -97,11 +98,15 @@ class OraclePlanner:
     def act(self, sim: Simulator) -> np.ndarray:
         """The first action (N,) of each running episode's best candidate (0 for finished
         ones, which the simulator ignores); ties go to the first in the table."""
-        actions = np.zeros(sim.num_envs, dtype=np.int64)
         running = np.flatnonzero(~sim.state.done)
+        if self.commands is None:
+            actions = np.zeros(sim.num_envs, dtype=np.int64)
+        else:
+            actions = np.zeros((sim.num_envs, 2))
         if running.size:
             best = self.scores(sim, running).argmax(axis=1)
-            actions[running] = self.prefixes[best // len(self.params.continuations), 0]
+            first = self.prefixes[best // len(self.params.continuations), 0]
+            actions[running] = first if self.commands is None else self.commands[first]
         return actions
 
 

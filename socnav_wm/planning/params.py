@@ -17,7 +17,10 @@ model of the goal and the humans: ``cv-mpc`` constant velocity (no learning), ``
 planning world model (``train_planning_model``'s seed 0), ``vae-lstm-mpc`` the paper's VAE +
 LSTM, ``oracle-mpc`` the simulator itself (the ceiling of the four actions)."""
 
+MAX_PREFIXES = 1024
+"""The most prefixes a planner scores (each with every continuation)."""
 Continuation = Literal["goal", "stop", "forward"]
+ActionSet = Literal["paper", "lattice"]
 CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")
 
 
@@ -47,7 +50,18 @@ class PlanningParams(Section):
     horizon: int = Field(12, gt=0)
     """Steps each candidate is predicted ahead."""
     prefix_length: int = Field(3, gt=0, le=5)
-    """Length of the exhaustive prefix (4**prefix_length candidates; at most 5, 1,024)."""
+    """Length of the exhaustive prefix (A**prefix_length candidates for A actions; at most
+    1,024)."""
+    actions: ActionSet = "paper"
+    """What the robot is commanded: ``paper``, the four discrete actions; ``lattice``, a lattice
+    of continuous commands (``lattice_speeds`` × ``lattice_headings``, and stop): (v, ω) for the
+    unicycle, velocities (vx, vy) in every direction for the holonomic robot. Only the planners
+    whose model takes continuous commands (``cv-mpc``, ``oracle-mpc``) plan over a lattice."""
+    lattice_speeds: int = Field(2, ge=1, le=5)
+    """``lattice``: the non-zero speeds, evenly up to the robot's maximum."""
+    lattice_headings: int = Field(8, ge=2, le=16)
+    """``lattice``: the turn rates, evenly in ±the robot's maximum (unicycle), or the
+    directions, evenly round the circle (holonomic)."""
     continuations: Continuations = CONTINUATIONS
     """What follows a prefix: ``goal`` (turn towards the predicted goal, then advance), ``stop``,
     ``forward``."""
@@ -83,7 +97,21 @@ class PlanningParams(Section):
     @model_validator(mode="after")
     def _consistent(self) -> Self:
         self._check_overrides("per_method", PLANNER_NAMES, "planner")
+        candidates = self.num_actions**self.prefix_length
+        if candidates > MAX_PREFIXES:
+            raise ValueError(
+                f"prefix_length: {self.num_actions} actions over {self.prefix_length} steps make "
+                f"{candidates:,} prefixes, more than {MAX_PREFIXES:,}"
+            )
         return self
+
+    @property
+    def num_actions(self) -> int:
+        """A: the paper's 4, or the lattice's commands (stop included; for the unicycle the
+        speeds include 0, turning in place)."""
+        if self.actions == "paper":
+            return 4
+        return (self.lattice_speeds + 1) * self.lattice_headings
 
     def resolved(self, method: str) -> PlanningParams:
         """The values planner ``method`` uses: ``self`` with ``per_method[method]`` applied (and

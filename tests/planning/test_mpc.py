@@ -8,11 +8,21 @@ import numpy as np
 import pytest
 
 from socnav_wm.config import ConfigError, load_params
+from socnav_wm.env.core import NUM_ACTIONS
 from socnav_wm.env.params import EnvParams
 from socnav_wm.evaluation.evaluate import evaluate_method
 from socnav_wm.evaluation.records import BASELINE_SEED
 from socnav_wm.planning.models import ConstantVelocityModel
-from socnav_wm.planning.mpc import FORWARD, LEFT, RIGHT, STOP, Planner, prefixes, towards_goal
+from socnav_wm.planning.mpc import (
+    FORWARD,
+    LEFT,
+    RIGHT,
+    STOP,
+    Planner,
+    command_table,
+    prefixes,
+    towards_goal,
+)
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.worldmodel.ego import predict_positions
 
@@ -30,7 +40,7 @@ def observation(goal: tuple[float, float], humans: list[tuple[float, float]]) ->
 
 
 def test_prefixes_are_every_sequence_once() -> None:
-    table = prefixes(3)
+    table = prefixes(3, NUM_ACTIONS)
     assert table.shape == (64, 3)
     assert len({tuple(row) for row in table}) == 64
     assert table[0].tolist() == [STOP, STOP, STOP]
@@ -73,8 +83,8 @@ def test_planner_advances_on_a_free_path_and_waits_for_a_crossing_human() -> Non
     planner.model.reset(observation((3.0, 0.0), first))
     planner.model.observe(observation((3.0, 0.0), crossing), np.array([STOP]))
     scores = planner.scores(np.array([[3.0, 0.0]])).reshape(64, -1)
-    forward_first = scores[prefixes(3)[:, 0] == FORWARD].max()
-    waiting = scores[prefixes(3)[:, 0] != FORWARD].max()
+    forward_first = scores[prefixes(3, NUM_ACTIONS)[:, 0] == FORWARD].max()
+    waiting = scores[prefixes(3, NUM_ACTIONS)[:, 0] != FORWARD].max()
     assert waiting > forward_first
     assert planner.act(observation((3.0, 0.0), crossing)).tolist() != [FORWARD]
 
@@ -152,3 +162,44 @@ def test_a_planner_uses_its_per_method_overrides_and_only_it(tmp_path) -> None:
     assert params.resolved("oracle-mpc").horizon == params.horizon == 12
     with pytest.raises(ValueError, match="unknown planner 'orca'"):
         params.resolved("orca")
+
+
+@pytest.mark.parametrize("kinematics", ["unicycle", "holonomic"])
+def test_a_lattice_has_every_speed_and_heading_and_stops_first(kinematics: str) -> None:
+    env = EnvParams(kinematics=kinematics, robot_max_speed=1.0)
+    params = PlanningParams(
+        actions="lattice", lattice_speeds=2, lattice_headings=8, prefix_length=1
+    )
+    table = command_table(params, env)
+    assert table.shape == (params.num_actions, 2) == (24, 2)
+    assert np.array_equal(table[0], [0.0, 0.0])
+    if kinematics == "holonomic":  # eight directions at 0.5 and 1 m/s
+        speeds = np.round(np.hypot(table[:, 0], table[:, 1]), 9)
+        assert sorted(set(speeds)) == [0.0, 0.5, 1.0]
+        assert np.count_nonzero(speeds == 1.0) == 8
+    else:  # three speeds, eight turn rates within the robot's limit
+        assert sorted(set(np.round(table[:, 0], 9))) == [0.0, 0.5, 1.0]
+        assert np.abs(table[:, 1]).max() == pytest.approx(env.robot_max_rotation)
+    assert command_table(PlanningParams(), env) is None
+
+
+def test_planners_on_a_lattice_send_continuous_commands_and_reach_goals() -> None:
+    env = load_params(overlays=["configs/scenarios/crowdnav.yaml"]).env
+    params = PlanningParams(actions="lattice", prefix_length=1, horizon=8)
+    for method in ("cv-mpc", "oracle-mpc"):
+        result = evaluate_method(
+            method, env_params=env, scenario_seed=3, episodes=4, planning=params, batch_size=4
+        )
+        assert result.episodes["success"].to_numpy().mean() >= 0.5, method
+
+
+def test_only_constant_velocity_and_the_oracle_plan_over_a_lattice() -> None:
+    with pytest.raises(ValueError, match="prefix_length: 24 actions over 3 steps make 13,824"):
+        PlanningParams(actions="lattice")
+    from socnav_wm.methods import METHODS
+    from socnav_wm.methods.planners import planner_policies
+
+    lattice = PlanningParams(actions="lattice", prefix_length=1)
+    for method in ("wm-mpc", "vae-lstm-mpc"):
+        with pytest.raises(ValueError, match=f"planning.actions: {method}'s model imagines"):
+            planner_policies(METHODS[method], ENV, lattice, lambda: None)
