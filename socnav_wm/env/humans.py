@@ -17,7 +17,7 @@ from socnav_wm.env import orca
 from socnav_wm.env.draws import STREAM_AVOID_ROBOT, uniform
 from socnav_wm.env.geometry import norm
 from socnav_wm.env.groups import group_pull
-from socnav_wm.env.obstacles import nearest_point, polygon_sizes, polygons, push_out
+from socnav_wm.env.obstacles import polygon_sizes, polygons, push_out, slot_nearest_point
 from socnav_wm.env.params import PAPER_SFM_SEES_ROBOT, EnvParams
 from socnav_wm.env.scenario import (
     FAMILY_CODES,
@@ -131,10 +131,9 @@ def sfm_velocities(
             for o in range(obstacle_kind.shape[1]):
                 if obstacle_kind[e, o] == OBSTACLE_NONE:
                     continue
-                qx, qy, d = nearest_point(
-                    px, py, obstacle_kind[e, o], obstacle_xy[e, o, 0], obstacle_xy[e, o, 1],
-                    obstacle_half[e, o, 0], obstacle_half[e, o, 1],
-                )  # fmt: skip
+                qx, qy, d = slot_nearest_point(
+                    px, py, e, o, obstacle_kind, obstacle_xy, obstacle_half
+                )
                 if d > 0.0:
                     mag = weight * _wall_push(d - human_radius, r0)
                     fx += mag * (px - qx) / d

@@ -16,7 +16,7 @@ import numba
 import numpy as np
 
 from socnav_wm.env.geometry import norm
-from socnav_wm.env.obstacles import nearest_point
+from socnav_wm.env.obstacles import slot_nearest_point
 from socnav_wm.env.state import OBSTACLE_NONE, OBSTACLE_TABLE
 
 GOAL_FIELDS = ("goal_x", "goal_y")
@@ -134,10 +134,7 @@ def observe(
         for o in range(num_obstacles):
             if obstacle_kind[e, o] == OBSTACLE_NONE:
                 continue
-            qx, qy, _ = nearest_point(
-                rx, ry, obstacle_kind[e, o], obstacle_xy[e, o, 0], obstacle_xy[e, o, 1],
-                obstacle_half[e, o, 0], obstacle_half[e, o, 1],
-            )  # fmt: skip
+            qx, qy, _ = slot_nearest_point(rx, ry, e, o, obstacle_kind, obstacle_xy, obstacle_half)
             odx[present] = qx - rx
             ody[present] = qy - ry
             order[present] = o  # the slot of the present-th obstacle

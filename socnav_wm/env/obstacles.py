@@ -49,6 +49,14 @@ def nearest_point(
     return x, cy + math.copysign(hy, dy), -to_y
 
 
+@numba.njit(cache=True, inline="always")
+def slot_nearest_point(
+    x: float, y: float, e: int, o: int, kind: np.ndarray, xy: np.ndarray, half: np.ndarray
+) -> tuple[float, float, float]:
+    """:func:`nearest_point` of obstacle slot ``o`` of env ``e`` (the state's arrays)."""
+    return nearest_point(x, y, kind[e, o], xy[e, o, 0], xy[e, o, 1], half[e, o, 0], half[e, o, 1])
+
+
 @numba.njit(cache=True)
 def disc_clearance(
     e: int, x: float, y: float, radius: float, kind: np.ndarray, xy: np.ndarray, half: np.ndarray
@@ -59,8 +67,7 @@ def disc_clearance(
     for o in range(kind.shape[1]):
         if kind[e, o] == OBSTACLE_NONE:
             continue
-        _, _, d = nearest_point(x, y, kind[e, o], xy[e, o, 0], xy[e, o, 1], half[e, o, 0],
-                                half[e, o, 1])  # fmt: skip
+        _, _, d = slot_nearest_point(x, y, e, o, kind, xy, half)
         best = min(best, d - radius)
     return best
 
@@ -77,8 +84,7 @@ def push_out(
             continue
         x = points[e, i, 0]
         y = points[e, i, 1]
-        px, py, d = nearest_point(x, y, kind[e, o], xy[e, o, 0], xy[e, o, 1], half[e, o, 0],
-                                  half[e, o, 1])  # fmt: skip
+        px, py, d = slot_nearest_point(x, y, e, o, kind, xy, half)
         if d >= radius:
             continue
         if d > 0.0:  # outside, too close: along the normal

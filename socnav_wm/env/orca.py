@@ -419,6 +419,20 @@ def _dist_sq_point_segment(ax, ay, bx, by, cx, cy):
     return (cx - ax - r * ex) ** 2 + (cy - ay - r * ey) ** 2
 
 
+@numba.njit(**_JIT, inline="always")
+def _insert_by_distance(nb_dist, nb_idx, count, d, index):
+    """Insert ``index`` at distance ``d`` into the first ``count`` entries, kept sorted (after
+    equal distances, as RVO2's insertion does); returns the new count."""
+    i = count
+    while i != 0 and d < nb_dist[i - 1]:
+        nb_dist[i] = nb_dist[i - 1]
+        nb_idx[i] = nb_idx[i - 1]
+        i -= 1
+    nb_dist[i] = d
+    nb_idx[i] = index
+    return count + 1
+
+
 @numba.njit(**_JIT)
 def _obstacle_neighbors(
     px,
@@ -470,14 +484,7 @@ def _obstacle_neighbors(
             if left_of < 0.0:
                 d = _dist_sq_point_segment(ax, ay, ob_point[v2, 0], ob_point[v2, 1], px, py)
                 if d < range_sq:
-                    i = count
-                    count += 1
-                    while i != 0 and d < nb_dist[i - 1]:
-                        nb_dist[i] = nb_dist[i - 1]
-                        nb_idx[i] = nb_idx[i - 1]
-                        i -= 1
-                    nb_dist[i] = d
-                    nb_idx[i] = v1
+                    count = _insert_by_distance(nb_dist, nb_idx, count, d, v1)
             far = tree_right[node] if left_of >= 0.0 else tree_left[node]
             if far >= 0:
                 st_node[sp] = far
@@ -614,14 +621,7 @@ def _orca_kernel(
                 if left_of < 0.0 and left_of * left_of / (ex * ex + ey * ey) < range_ob:
                     d = _dist_sq_point_segment(ax, ay, all_point[v2, 0], all_point[v2, 1], px, py)
                     if d < range_ob:
-                        i = n_ob
-                        n_ob += 1
-                        while i != 0 and d < ob_nb_dist[i - 1]:
-                            ob_nb_dist[i] = ob_nb_dist[i - 1]
-                            ob_nb_idx[i] = ob_nb_idx[i - 1]
-                            i -= 1
-                        ob_nb_dist[i] = d
-                        ob_nb_idx[i] = v
+                        n_ob = _insert_by_distance(ob_nb_dist, ob_nb_idx, n_ob, d, v)
 
             n_ag = 0
             if max_neighbors > 0:
