@@ -187,7 +187,7 @@ def bench_collect(
     from pathlib import Path
 
     from socnav_wm.data.collect import collect_rollouts
-    from socnav_wm.env.observation import observation_size
+    from socnav_wm.env.observation_layout import observation_size
     from socnav_wm.env.params import EnvParams
     from socnav_wm.resources import check_disk
 

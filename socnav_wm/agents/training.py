@@ -61,7 +61,7 @@ from socnav_wm.agents.replay import NStepAccumulator, ReplayBuffer
 from socnav_wm.devices import resolve_device
 from socnav_wm.env.core import Simulator, StepResult
 from socnav_wm.env.episode import Episode
-from socnav_wm.env.observation import observation_size
+from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_HUMAN, COLLISION_WALL, BatchState
 from socnav_wm.env.wrappers import goal_distance, progress_shaping

@@ -210,7 +210,7 @@ def report(
 
 
 @command("scenarios-report")
-@shared_options("params", "no-tracking")
+@shared_options("params", "set", "overlay", "no-tracking")
 def scenarios_report(
     options: SharedOptions,
     presets_dir: Annotated[

@@ -21,7 +21,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from socnav_wm.data.schema import FEATURES_PER_HUMAN, GOAL_FEATURES, observation_dim
-from socnav_wm.env.observation import observation_size
+from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.env.params import EnvParams
 
 __all__ = ["check_made_with", "made_with", "observation_record"]

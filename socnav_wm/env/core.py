@@ -23,7 +23,8 @@ import numpy as np
 from socnav_wm.env.crossing import spawn_crossing
 from socnav_wm.env.geometry import norm
 from socnav_wm.env.humans import HumanDynamics
-from socnav_wm.env.observation import observation_size, observe
+from socnav_wm.env.observation import observe
+from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.env.obstacles import disc_clearance
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.reward import (

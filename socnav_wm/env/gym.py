@@ -16,7 +16,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from socnav_wm.env.core import MAX_SCENARIO_ID, NUM_ACTIONS, Simulator, StepResult
-from socnav_wm.env.observation import observation_size
+from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.state import COLLISION_NAMES
 

@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from socnav_wm.env.observation import observation_size
+from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.env.params import EnvParams
 from socnav_wm.worldmodel.ego import advance, commands_of, human_velocities, positions
 

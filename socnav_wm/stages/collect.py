@@ -6,7 +6,7 @@ from pathlib import Path
 
 from socnav_wm.config import Params
 from socnav_wm.data.collect import collect_rollouts
-from socnav_wm.env.observation import observation_size
+from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.io import check_writable, outputs_together, write_json_atomic
 from socnav_wm.progress import progress
 from socnav_wm.resources import check_disk

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from socnav_wm.env import Simulator
-from socnav_wm.env.observation import observation_names, observation_size, observe
+from socnav_wm.env.observation import observe
+from socnav_wm.env.observation_layout import observation_names, observation_size
 from tests.env.conftest import frozen_humans_params, place
 
 STOP, FORWARD = 0, 1
