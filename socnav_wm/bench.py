@@ -124,11 +124,17 @@ def bench_env(
     ``peak_mb`` is the peak of traced allocations (numpy arrays included) from building the env
     through 20 steps: the simulator's own memory, not the interpreter's. Rows per human policy
     of the paper's scenario, or, given ``scenarios`` (name → EnvParams fields: a preset), per
-    scenario.
+    scenario with its own humans, or per scenario and policy where ``policies`` is not empty.
     """
     presets = scenarios is not None
     if scenarios is None:
         runs = [("paper", {"human_policy": policy}) for policy in policies]
+    elif policies:
+        runs = [
+            (name, {**options, "human_policy": policy})
+            for name, options in scenarios.items()
+            for policy in policies
+        ]
     else:
         runs = list(scenarios.items())
     rows = []

@@ -71,6 +71,19 @@ def test_bench_env_prints_a_table() -> None:
     assert machine.startswith("machine: ") and machine.endswith(" cores")
 
 
+def test_bench_env_gives_a_preset_per_policy_when_both_are_asked() -> None:
+    args = ["bench", "env", "--batch", "4", "--seconds", "0.1",
+            "--overlay", "configs/scenarios/crowdnav.yaml"]  # fmt: skip
+    own = runner.invoke(app, args)
+    assert own.exit_code == 0, own.output
+    rows = [line for line in own.output.splitlines() if "crowdnav" in line]
+    assert len(rows) == 1 and "orca" in rows[0]  # the preset's own humans
+    both = runner.invoke(app, [*args, "--humans", "sfm", "--humans", "mixed"])
+    assert both.exit_code == 0, both.output
+    rows = [line for line in both.output.splitlines() if "crowdnav" in line]
+    assert len(rows) == 2 and "sfm" in rows[0] and "mixed" in rows[1]
+
+
 def test_bench_env_rejects_an_unknown_human_policy() -> None:
     result = runner.invoke(app, ["bench", "env", "--humans", "robots"])
     assert result.exit_code == 2

@@ -40,7 +40,7 @@ def bench_env_command(
         list[Path] | None,
         typer.Option(
             help="A scenario preset (configs/scenarios/NAME.yaml; repeatable): rows per preset, "
-            "with its humans, instead of per --humans."
+            "with its own humans, or per preset and --humans policy when both are given."
         ),
     ] = None,
 ) -> None:
@@ -48,7 +48,8 @@ def bench_env_command(
     from socnav_wm.bench import ENV_BATCH_SIZES, ENV_POLICIES, bench_env, one_core
     from socnav_wm.config import load_params
 
-    policies = tuple(humans or ENV_POLICIES)
+    # With presets, --humans replaces each preset's humans; without it, a preset keeps its own.
+    policies = tuple(humans or (() if overlay else ENV_POLICIES))
     for policy in policies:
         if policy not in ENV_POLICIES:
             raise UserError(f"--humans: must be one of {', '.join(ENV_POLICIES)}, got {policy!r}")

@@ -44,6 +44,79 @@ def _wall_push(gap: float, r0: float) -> float:
     return math.exp(-x) if x < _EXP_CUTOFF else 0.0
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _moves(e: int, i: int, human_policy: np.ndarray, still: np.ndarray, grouped: bool) -> bool:
+    """Whether human i of env e moves by the social force (an SFM human not standing still)."""
+    return human_policy[e, i] == POLICY_SFM and not (grouped and still[e, i])
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _pair_forces(
+    e: int,
+    human_xy: np.ndarray,
+    human_heading: np.ndarray,
+    human_speed: np.ndarray,
+    human_policy: np.ndarray,
+    still: np.ndarray,
+    grouped: bool,
+    gamma: float,
+    n: float,
+    n_prime: float,
+    lam: float,
+    weight: float,
+    pair: np.ndarray,
+    pair_ok: np.ndarray,
+) -> None:
+    """The interaction force ``pair[i, j]`` (subtracted from i's force) of every pair of env e
+    in which a human moves by the social force, and ``pair_ok[i, j]`` where it applies.
+
+    Each pair is computed once: swapping i and j negates e_ij and the velocity difference, so
+    the interaction direction t, the normal and the force change sign while d_ij, B, θ and the
+    exponentials stay the same. In IEEE arithmetic a − b = −(b − a) and (−a)·b = −(a·b) exactly,
+    so ``pair[j, i] = −pair[i, j]`` is bit for bit what computing it from j's side gives.
+    """
+    num_humans = human_speed.shape[1]
+    for i in range(num_humans):
+        moves_i = _moves(e, i, human_policy, still, grouped)
+        px = human_xy[e, i, 0]
+        py = human_xy[e, i, 1]
+        vix = human_speed[e, i] * human_heading[e, i, 0]
+        viy = human_speed[e, i] * human_heading[e, i, 1]
+        for j in range(i + 1, num_humans):
+            if not (moves_i or _moves(e, j, human_policy, still, grouped)):
+                pair_ok[i, j] = False
+                pair_ok[j, i] = False
+                continue
+            ex = human_xy[e, j, 0] - px
+            ey = human_xy[e, j, 1] - py
+            d_ij = norm(ex, ey)
+            if d_ij > 0.0:
+                ex /= d_ij
+                ey /= d_ij
+            dx = lam * (human_speed[e, j] * human_heading[e, j, 0] - vix) + ex
+            dy = lam * (human_speed[e, j] * human_heading[e, j, 1] - viy) + ey
+            dnorm = norm(dx, dy)
+            b = gamma * dnorm
+            ok = b != 0.0
+            pair_ok[i, j] = ok
+            pair_ok[j, i] = ok
+            if not ok:
+                continue
+            tx = dx / dnorm
+            ty = dy / dnorm
+            theta = math.acos(min(1.0, max(-1.0, ex * tx + ey * ty)))
+            decay = math.exp(-d_ij / b)
+            a_t = math.exp(-((n_prime * b * theta) ** 2))
+            a_n = a_t if n == n_prime else math.exp(-((n * b * theta) ** 2))
+            # The normal is e_ij turned left: (−e_y, e_x).
+            fx = weight * decay * (a_t * tx - a_n * ey)
+            fy = weight * decay * (a_t * ty + a_n * ex)
+            pair[i, j, 0] = fx
+            pair[i, j, 1] = fy
+            pair[j, i, 0] = -fx
+            pair[j, i, 1] = -fy
+
+
 @numba.njit(cache=True, error_model="numpy")
 def sfm_velocities(
     seed: int,
@@ -98,7 +171,13 @@ def sfm_velocities(
     group's) does not move.
     """
     num_envs, num_humans = human_speed.shape
+    pair = np.empty((num_humans, num_humans, 2))
+    pair_ok = np.zeros((num_humans, num_humans), dtype=np.bool_)
     for e in range(num_envs):
+        _pair_forces(
+            e, human_xy, human_heading, human_speed, human_policy, still, grouped, gamma, n,
+            n_prime, lam, weight, pair, pair_ok,
+        )  # fmt: skip
         for i in range(num_humans):
             if human_policy[e, i] != POLICY_SFM:
                 continue
@@ -165,33 +244,11 @@ def sfm_velocities(
                         mag = weight * _wall_push(dist - robot_radius - human_radius, r0)
                         fx += mag * ox / dist
                         fy += mag * oy / dist
-            # Other humans.
-            vix = human_speed[e, i] * human_heading[e, i, 0]
-            viy = human_speed[e, i] * human_heading[e, i, 1]
+            # Other humans: the pair forces of this env (computed once per pair, below).
             for j in range(num_humans):
-                if j == i:
-                    continue
-                ex = human_xy[e, j, 0] - px
-                ey = human_xy[e, j, 1] - py
-                d_ij = norm(ex, ey)
-                if d_ij > 0.0:
-                    ex /= d_ij
-                    ey /= d_ij
-                dx = lam * (human_speed[e, j] * human_heading[e, j, 0] - vix) + ex
-                dy = lam * (human_speed[e, j] * human_heading[e, j, 1] - viy) + ey
-                dnorm = norm(dx, dy)
-                b = gamma * dnorm
-                if b == 0.0:
-                    continue
-                tx = dx / dnorm
-                ty = dy / dnorm
-                theta = math.acos(min(1.0, max(-1.0, ex * tx + ey * ty)))
-                decay = math.exp(-d_ij / b)
-                a_t = math.exp(-((n_prime * b * theta) ** 2))
-                a_n = a_t if n == n_prime else math.exp(-((n * b * theta) ** 2))
-                # The normal is e_ij turned left: (−e_y, e_x).
-                fx -= weight * decay * (a_t * tx - a_n * ey)
-                fy -= weight * decay * (a_t * ty + a_n * ex)
+                if j != i and pair_ok[i, j]:
+                    fx -= pair[i, j, 0]
+                    fy -= pair[i, j, 1]
             vx = fx * dt
             vy = fy * dt
             speed = norm(vx, vy)
