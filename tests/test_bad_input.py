@@ -190,6 +190,31 @@ def test_an_agent_of_another_room_is_refused(workdir: Path) -> None:
     )
 
 
+def test_a_model_of_another_world_is_used_only_in_a_transfer_evaluation(workdir: Path) -> None:
+    """Same observation, other behaviour (here: humans who see the robot): refused in one line
+    naming the field and both values, used with --transfer (and the evaluation says so)."""
+    from socnav_wm.evaluation.records import evaluation_metadata
+    from tests.evaluation.conftest import save_tiny_agent
+
+    seeing = EnvParams(humans_see_robot=True)
+    for seed in (0, 1):
+        path = workdir / "agents" / "dueling-dqn" / f"seed-{seed}.pt"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_tiny_agent(path, "dueling-dqn", seeing, seed=seed)
+    args = ("evaluate", "--method", "dueling-dqn", "--agents-dir", "agents", "--set",
+            "eval.episodes=2", "--out-dir", "transfer", "--metrics-dir", "transfer")  # fmt: skip
+    assert refused(workdir, *args) == (
+        "agents/dueling-dqn/seed-0.pt: trained with env.humans_see_robot true; the params have "
+        "paper (another scenario: use it here only as a transfer, --transfer)"
+    )
+    result = runner.invoke(app, [*args, "--transfer", "--no-tracking"])
+    assert result.exit_code == 0, result.output
+    metadata = evaluation_metadata(workdir / "transfer" / "dueling-dqn.parquet")
+    assert metadata["settings"]["transfer"] is True
+    message = refused(workdir, "evaluate", "--method", "orca", "--transfer")
+    assert message == "robot 'orca' reads no model files: nothing to transfer"
+
+
 def _without_env(source: Path, target: Path) -> Path:
     """``source`` as a file written before the scenarios (and a format version) were saved."""
     payload = torch.load(source, weights_only=True)

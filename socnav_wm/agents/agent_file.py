@@ -205,7 +205,11 @@ def save_agent(path: str | Path, result: TrainResult, extra: dict[str, Any] | No
 
 
 def load_agent(
-    path: str | Path, device: torch.device | str = "cpu", env_params: EnvParams | None = None
+    path: str | Path,
+    device: torch.device | str = "cpu",
+    env_params: EnvParams | None = None,
+    *,
+    transfer: bool = False,
 ) -> Agent:
     """Load an agent written by :func:`save_agent`, on ``device`` (``auto``/``cpu``/``cuda``).
 
@@ -218,7 +222,7 @@ def load_agent(
     path = Path(path)
     payload = load_saved(path, "agent file", AGENT_FORMAT, AGENT_FORMAT_VERSION, AgentFileError)
     made = payload.get("env_params") if isinstance(payload.get("env_params"), dict) else None
-    check_made_with(path, made, env_params, error=AgentFileError)
+    check_made_with(path, made, env_params, error=AgentFileError, transfer=transfer)
     target = resolve_device(device)
     try:
         params = AgentParams.from_dict(payload["params"])

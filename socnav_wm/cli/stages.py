@@ -137,6 +137,10 @@ def _default(path: Path) -> str:
     return f"\\[default: {path.as_posix()}]"
 
 
+TRANSFER_HELP = (
+    "Use model files trained in another scenario (other humans' behaviour, obstacles, groups "
+    "or speeds; the same observation): a transfer evaluation. Without it they are refused."
+)
 EvaluationOut = path_option("Writes {method}.parquet and {method}-trajectories.parquet.")
 EvaluationMetrics = path_option("Writes {method}.json.")
 
@@ -160,6 +164,7 @@ def evaluate(
     lstm: Annotated[
         Path | None, typer.Option(help=f"vae-lstm-mpc's LSTM {_default(LAYOUT.lstm)}.")
     ] = None,
+    transfer: Annotated[bool, typer.Option(help=TRANSFER_HELP)] = False,
 ) -> None:
     """Run one method greedily on the test scenarios: every training seed of an agent
     (`experiment.seeds`), a baseline, or a planner (cv-mpc, wm-mpc, vae-lstm-mpc, oracle-mpc)
@@ -180,6 +185,7 @@ def evaluate(
             for role, path in (("planning_model", planning_model), ("vae", vae), ("lstm", lstm))
             if path is not None
         },
+        transfer=transfer,
     )
 
 
@@ -264,6 +270,7 @@ def predict(
     ] = None,
     out: Annotated[Path, typer.Option(help="The errors (JSON).")] = LAYOUT.prediction_metrics,
     figure: Annotated[Path, typer.Option(help="Error against k (PNG).")] = LAYOUT.prediction_figure,
+    transfer: Annotated[bool, typer.Option(help=TRANSFER_HELP)] = False,
 ) -> None:
     """k-step prediction errors in metres of the world model (VAE + LSTM) and the planning world
     model's seeds beside copy-last, static humans and constant velocity (the robot's own motion
@@ -283,6 +290,7 @@ def predict(
         planning_models=planning_model,
         out=out,
         figure=figure,
+        transfer=transfer,
         **options.stage_options(),
     )
     for title, rows, formats in stage.tables(result, PREDICTION_KS):

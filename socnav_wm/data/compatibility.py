@@ -24,7 +24,27 @@ from socnav_wm.data.schema import FEATURES_PER_HUMAN, GOAL_FEATURES, observation
 from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.env.params import EnvParams
 
-__all__ = ["check_made_with", "made_with", "observation_record"]
+__all__ = ["BEHAVIOUR_FIELDS", "check_made_with", "made_with", "observation_record"]
+
+BEHAVIOUR_FIELDS = (
+    "dt",
+    "robot_max_speed",
+    "robot_max_rotation",
+    "human_max_speed",
+    "human_policy",
+    "human_speed_range",
+    "humans_see_robot",
+    "ignore_robot_prob",
+    "tables",
+    "plants",
+    "groups",
+    "standing_groups",
+    "group_size",
+)
+"""The ``env`` fields that say how the world moves and what is in it (the scenario preset's
+behaviour, beyond the observation's shape): a model or agent trained with other values learned
+another world. Using it there is a transfer evaluation, refused unless asked for (``transfer``);
+a file that does not record a field is not judged on it."""
 
 
 def made_with(env_params: EnvParams) -> dict[str, Any]:
@@ -73,6 +93,39 @@ def _check_scenario_kind(
             )
 
 
+def _check_behaviour(
+    path: str | os.PathLike[str],
+    made: Mapping[str, Any],
+    env_params: EnvParams,
+    verb: str,
+    error: type[ValueError],
+) -> None:
+    """Refuse a file made in a world that moves otherwise (:data:`BEHAVIOUR_FIELDS`), naming
+    the first field that differs and both values."""
+    ours = env_params.to_dict()
+    for name in BEHAVIOUR_FIELDS:
+        if name not in made:
+            continue
+        theirs = made[name]
+        if isinstance(theirs, list | tuple):
+            theirs = list(theirs)
+        mine = list(ours[name]) if isinstance(ours[name], list | tuple) else ours[name]
+        if theirs != mine:
+            raise error(
+                f"{path}: {verb} with env.{name} {_shown(theirs)}; the params have "
+                f"{_shown(mine)} (another scenario: use it here only as a transfer, --transfer)"
+            )
+
+
+def _shown(value: Any) -> str:
+    """A parameter value as a user writes it in params.yaml."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if value is None:
+        return "null"
+    return str(value)
+
+
 def check_made_with(
     path: str | os.PathLike[str],
     made: Mapping[str, Any] | None,
@@ -80,12 +133,15 @@ def check_made_with(
     *,
     verb: str = "trained",
     error: type[ValueError] = ValueError,
+    transfer: bool = False,
 ) -> None:
     """Refuse the file ``path`` when what it records of its scenarios (``made``: its ``env``
     record, or for an older file what :func:`observation_record` tells, and a planning model's
     ``spawn_half_size``) differs from ``env_params`` in the number of humans, the size of the
-    observation or the size of the room. Nothing is compared when either side is None, nor
-    what the file does not record.
+    observation or the size of the room, the observation's layout, the kinematics or the
+    scenario family and, unless ``transfer`` (an evaluation of a model of one scenario in
+    another, asked for explicitly), in how the world moves (:data:`BEHAVIOUR_FIELDS`). Nothing
+    is compared when either side is None, nor what the file does not record.
 
     Raises:
         error: ``{path}: {verb} with 5 humans in a 10.0 m room; the params have 3 humans in a
@@ -93,6 +149,20 @@ def check_made_with(
     """
     if made is None or env_params is None:
         return
+    _check_shape(path, made, env_params, verb, error)
+    if not transfer:
+        _check_behaviour(path, made, env_params, verb, error)
+
+
+def _check_shape(
+    path: str | os.PathLike[str],
+    made: Mapping[str, Any],
+    env_params: EnvParams,
+    verb: str,
+    error: type[ValueError],
+) -> None:
+    """What no transfer can bridge: the humans, the observation, the room, the kinematics and
+    the scenario family (:func:`check_made_with`)."""
     humans, obs_dim = made.get("num_humans"), made.get("obs_dim")
     room, spawn = made.get("room_size"), made.get("spawn_half_size")
     other_goals = room is None and spawn is not None and spawn != env_params.spawn_half_size

@@ -112,6 +112,7 @@ def evaluate_method(
     device: str | None = None,
     batch_size: int = 500,
     quiet: bool = True,
+    transfer: bool = False,
 ) -> EvaluationResult:
     """Run method ``name`` on scenarios ``0..episodes−1`` of ``scenario_seed``, record everything.
 
@@ -133,6 +134,8 @@ def evaluate_method(
         batch_size: scenarios simulated together (all of a seed's scenarios in one batch by
             default); the results do not depend on it.
         quiet: no progress bar.
+        transfer: use model files trained in another world (a transfer evaluation, recorded
+            in the settings); without it they are refused in one line.
 
     Returns:
         An :class:`EvaluationResult` (write it with :func:`write_evaluation`).
@@ -156,7 +159,7 @@ def evaluate_method(
         raise ValueError(f"method {name!r} needs agent files (training seed → path)")
     ids = np.arange(episodes, dtype=np.int64)
     start = time.perf_counter()
-    settings: dict[str, Any] = {}
+    settings: dict[str, Any] = {"transfer": True} if transfer else {}
     runs: dict[int, PolicyFactory] = {}  # training seed → its policies
     if entry.kind == "planner":
         if planning is None:
@@ -164,18 +167,24 @@ def evaluate_method(
         files = entry.files(planner_files)
         settings["planning"] = planning.to_dict()
         settings["model_files"] = {role: str(path) for role, path in files.items()}
-        runs[BASELINE_SEED] = entry.policies(env_params, files=files, planning=planning)
+        runs[BASELINE_SEED] = entry.policies(
+            env_params, files=files, planning=planning, transfer=transfer
+        )
     elif entry.kind == "robot":
         overrides = dict(baseline_overrides or {})
         settings["baseline_overrides"] = overrides
-        runs[BASELINE_SEED] = entry.policies(env_params, baseline=overrides)
+        runs[BASELINE_SEED] = entry.policies(env_params, baseline=overrides, transfer=transfer)
     else:
         assert agent_paths is not None
         seeds = sorted(int(s) for s in agent_paths)
         settings["agent_files"] = {str(s): str(agent_paths[s]) for s in seeds}
         for seed in seeds:  # each agent is loaded when its seed's turn comes
             runs[seed] = functools.partial(
-                entry.policies, env_params, files={"agent": Path(agent_paths[seed])}, device=device
+                entry.policies,
+                env_params,
+                files={"agent": Path(agent_paths[seed])},
+                device=device,
+                transfer=transfer,
             )
     episode_tables: list[pa.Table] = []
     trajectory_tables: list[pa.Table] = []

@@ -104,6 +104,7 @@ class Method:
         baseline: Mapping[str, Any] | None = None,
         planning: PlanningParams | None = None,
         device: str | None = None,
+        transfer: bool = False,
     ) -> PolicyFactory:
         """The factory of this method's policies on scenarios of ``env_params``.
 
@@ -115,6 +116,9 @@ class Method:
             planning: a planner's parameters (the ``planning`` section; its ``per_method``
                 entry for this planner is applied here).
             device: where an agent's network runs (``cpu``, ``cuda``, ``auto``).
+            transfer: a method with model files may use files trained in another world (another
+                preset's humans, obstacles or speeds: a transfer evaluation); without it they
+                are refused (:func:`socnav_wm.data.compatibility.check_made_with`).
 
         Raises:
             ValueError: an input this kind of method does not take, or a missing one; an
@@ -130,13 +134,19 @@ class Method:
         files = self.files() if files is None else dict(files)
         module, _, function = self.builder.partition(":")
         build = getattr(importlib.import_module(module), function)
-        return build(self, env_params, files=files, **{k: given[k] for k in takes})
+        inputs = {k: given[k] for k in takes}
+        if self.model_files:  # the builders that load model files judge them
+            inputs["transfer"] = transfer
+        elif transfer:
+            raise ValueError(f"{self.kind} {self.name!r} reads no model files: nothing to transfer")
+        return build(self, env_params, files=files, **inputs)
 
     def configured(
         self,
         env_params: EnvParams,
         sections: Mapping[str, Any],
         files: Mapping[str, Path] | None = None,
+        transfer: bool = False,
     ) -> PolicyFactory:
         """:meth:`policies` with the inputs read from the ``params.yaml`` sections of
         :attr:`sections` (``sections``: name → that section's parameters, e.g. ``{"planning":
@@ -146,11 +156,13 @@ class Method:
         if missing:
             raise ValueError(f"{self.kind} {self.name!r} needs the {', '.join(missing)} section")
         if self.kind == "agent":
-            return self.policies(env_params, files=files, device=sections["eval"].device)
+            device = sections["eval"].device
+            return self.policies(env_params, files=files, device=device, transfer=transfer)
         if self.kind == "robot":
             overrides = getattr(sections["baselines"], self.name).model_dump()
-            return self.policies(env_params, files=files, baseline=overrides)
-        return self.policies(env_params, files=files, planning=sections["planning"])
+            return self.policies(env_params, files=files, baseline=overrides, transfer=transfer)
+        planning = sections["planning"]
+        return self.policies(env_params, files=files, planning=planning, transfer=transfer)
 
 
 _BUILDERS: dict[str, str] = {

@@ -14,11 +14,17 @@ from socnav_wm.worldmodel.planning_file import load_residual
 
 
 def build(
-    method: Method, env_params: EnvParams, *, files: Mapping[str, Path], planning: PlanningParams
+    method: Method,
+    env_params: EnvParams,
+    *,
+    files: Mapping[str, Path],
+    planning: PlanningParams,
+    transfer: bool,
 ) -> PolicyFactory:
     """The planning model ``files["planning_model"]`` (refused in one line when it was trained
-    for other scenarios than ``env_params``), a fresh copy for every batch."""
-    model = load_residual(files["planning_model"], env_params)
+    for other scenarios than ``env_params``; in another world, unless ``transfer``), a fresh
+    copy for every batch."""
+    model = load_residual(files["planning_model"], env_params, transfer=transfer)
     return planner_policies(
         method, env_params, planning, lambda: ResidualPlanningModel(model, env_params)
     )

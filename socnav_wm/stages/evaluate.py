@@ -29,6 +29,7 @@ def run(
     planner_files: dict[str, Path] | None = None,
     tracking: bool = True,
     quiet: bool = True,
+    transfer: bool = False,
 ) -> str:
     kind = lookup(method, "--method").kind
     stage = {"agent": "evaluate", "robot": "evaluate_baseline", "planner": "evaluate_planner"}[kind]
@@ -69,6 +70,7 @@ def run(
             device=params.eval.device,
             batch_size=params.eval.batch_size,
             quiet=quiet,
+            transfer=transfer,
         )
         with outputs_together(episodes_path, trajectories_path, metrics_path) as paths:
             write_evaluation(result, *paths)

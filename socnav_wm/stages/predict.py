@@ -29,16 +29,21 @@ def run(
     out: Path,
     figure: Path,
     tracking: bool = True,
+    transfer: bool = False,
 ) -> dict[str, Any]:
     """Measure with the ``prediction`` section's settings, write ``out`` and ``figure``
     together, log to MLflow; returns the errors. ``planning_models``: one file per training seed
     of the planning world model. Every model is loaded first, and refused in one line when it
-    was made for other scenarios than ``params.env``."""
+    was made for other scenarios than ``params.env`` (in another world, unless ``transfer``:
+    then the errors say how the models transfer)."""
     check_writable(out, figure)
-    planners = [load_residual(path, params.env) for path in planning_models]
-    world_model = load_vae_lstm(vae, lstm, env_params=params.env)
-    policy = load_agent(agent, env_params=params.env) if agent is not None else None
+    planners = [load_residual(path, params.env, transfer=transfer) for path in planning_models]
+    world_model = load_vae_lstm(vae, lstm, env_params=params.env, transfer=transfer)
+    policy = (
+        load_agent(agent, env_params=params.env, transfer=transfer) if agent is not None else None
+    )
     settings = {
+        "transfer": transfer,
         **select_sections(params_dict(params), STAGE_SECTIONS["predict"]),
         "files": {
             "agent": str(agent) if agent else None,

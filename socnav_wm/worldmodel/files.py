@@ -107,7 +107,11 @@ def save_vae(
 
 
 def load_vae(
-    path: str | Path, device: torch.device | str = "cpu", env_params: EnvParams | None = None
+    path: str | Path,
+    device: torch.device | str = "cpu",
+    env_params: EnvParams | None = None,
+    *,
+    transfer: bool = False,
 ) -> VAE:
     """Load a VAE written by :func:`save_vae`, in eval mode on ``device``; refused when it was
     trained for other scenarios than ``env_params`` (None: not checked)."""
@@ -116,7 +120,7 @@ def load_vae(
     if not isinstance(made, dict):  # written before the scenarios were recorded
         input_dim = (payload.get("hyperparameters") or {}).get("input_dim")
         made = observation_record(input_dim) if isinstance(input_dim, int) else None
-    check_made_with(path, made, env_params, error=ModelFileError)
+    check_made_with(path, made, env_params, error=ModelFileError, transfer=transfer)
     return _build(Path(path), payload, VAE, device)
 
 
@@ -134,14 +138,18 @@ def save_lstm(
 
 
 def load_lstm(
-    path: str | Path, device: torch.device | str = "cpu", env_params: EnvParams | None = None
+    path: str | Path,
+    device: torch.device | str = "cpu",
+    env_params: EnvParams | None = None,
+    *,
+    transfer: bool = False,
 ) -> LatentLSTM:
     """Load a latent LSTM written by :func:`save_lstm`, in eval mode on ``device``; refused when
     it was trained for other scenarios than ``env_params`` (None, or a file that does not
     record them: not checked)."""
     payload = load_checkpoint(path, "lstm")
     made = payload.get("env") if isinstance(payload.get("env"), dict) else None
-    check_made_with(path, made, env_params, error=ModelFileError)
+    check_made_with(path, made, env_params, error=ModelFileError, transfer=transfer)
     return _build(Path(path), payload, LatentLSTM, device)
 
 
@@ -150,11 +158,13 @@ def load_vae_lstm(
     lstm_path: str | Path,
     device: torch.device | str = "cpu",
     env_params: EnvParams | None = None,
+    *,
+    transfer: bool = False,
 ) -> tuple[VAE, LatentLSTM]:
     """The paper's world model: :func:`load_vae` and :func:`load_lstm`, and the LSTM must
     predict the latents the VAE encodes (ModelFileError naming both files otherwise)."""
-    vae = load_vae(vae_path, device, env_params)
-    lstm = load_lstm(lstm_path, device, env_params)
+    vae = load_vae(vae_path, device, env_params, transfer=transfer)
+    lstm = load_lstm(lstm_path, device, env_params, transfer=transfer)
     if lstm.latent_dim != vae.latent_dim:
         raise ModelFileError(
             f"{lstm_path}: predicts {lstm.latent_dim}-d latents, the VAE {vae_path} encodes "

@@ -60,7 +60,9 @@ def _made_with(data: dict[str, Any]) -> dict[str, Any] | None:
     return made
 
 
-def load_residual(path: str | Path, env_params: EnvParams | None = None) -> ResidualDynamics:
+def load_residual(
+    path: str | Path, env_params: EnvParams | None = None, *, transfer: bool = False
+) -> ResidualDynamics:
     """A model written by :func:`save_residual`, in eval mode on the CPU.
 
     Raises:
@@ -78,7 +80,7 @@ def load_residual(path: str | Path, env_params: EnvParams | None = None) -> Resi
     check_format(
         data, path, WHAT, PLANNING_MODEL_FORMAT, PLANNING_MODEL_FORMAT_VERSION, ModelFileError
     )
-    check_made_with(path, _made_with(data), env_params, error=ModelFileError)
+    check_made_with(path, _made_with(data), env_params, error=ModelFileError, transfer=transfer)
     try:
         model = ResidualDynamics(
             data["num_humans"],
