@@ -352,6 +352,23 @@ def test_check_refuses_a_missing_metric_a_corrupt_file_or_a_missing_method(workd
     )
 
 
+def test_check_says_which_differing_planner_rests_on_one_model_training(workdir: Path) -> None:
+    for method in ("dueling-dqn", "vae-lstm-mpc", "cv-mpc"):
+        _metrics(workdir / "committed", method)
+        _metrics(workdir / "rerun", method)
+    for method in ("dueling-dqn", "vae-lstm-mpc", "cv-mpc"):  # every rerun differs
+        content = json.loads((workdir / "rerun" / f"{method}.json").read_text())
+        content["metrics"]["success"] = {"mean": 0.5, "low": 0.45, "high": 0.55, "n": 500}
+        (workdir / "rerun" / f"{method}.json").write_text(json.dumps(content))
+    result = runner.invoke(app, ["check", "rerun", "--committed", "committed"])
+    assert result.exit_code == 1, result.output
+    notes = [line for line in result.output.splitlines() if "one training" in line]
+    assert notes == [
+        "vae-lstm-mpc: plans with one training of its model files; its interval counts the "
+        "test scenarios only, not that training's chance (docs/reproducibility.md)"
+    ]
+
+
 # ------------------------------------------------------------------ 5-7: report, deps, claims
 
 
