@@ -173,12 +173,13 @@ def _p(value: float) -> str:
 
 def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]) -> ScenarioTable:
     """Every method of :data:`SCENARIO_METHODS` in every preset of ``presets`` that has a
-    metrics file in ``metrics_dir/PRESET/``; the gap where both planners' episodes are in
-    ``episodes_dir/PRESET/``.
+    metrics file in ``metrics_dir/PRESET/``; the gap of every preset where both planners were
+    evaluated, from their episodes in ``episodes_dir/PRESET/``.
 
     Raises:
-        ValueError: no metrics file at all, or a file that is not an evaluation's (one line
-            naming it).
+        ValueError: no metrics file at all, a file that is not an evaluation's, or a preset
+            whose planners have metrics but not their episodes (a fresh clone's: DVC's cache
+            holds them), which would drop its gap from the table (one line naming it).
     """
     summaries: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     gaps: dict[str, dict[str, Any]] = {}
@@ -201,7 +202,13 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             summaries[preset] = methods
         oracle = episodes_dir / preset / "oracle-mpc.parquet"
         physics = episodes_dir / preset / "cv-mpc.parquet"
-        if oracle.is_file() and physics.is_file():
+        if "oracle-mpc" in methods and "cv-mpc" in methods:
+            for path in (oracle, physics):
+                if not path.is_file():
+                    raise ValueError(
+                        f"{path}: no such episodes file, and the paired oracle-mpc − cv-mpc gap "
+                        f"of {preset} needs it (dvc repro scenarios/dvc.yaml)"
+                    )
             result = compare(pq.read_table(oracle), pq.read_table(physics), "success")
             gaps[preset] = {
                 "difference": 100 * result.difference,

@@ -92,3 +92,23 @@ def test_no_evaluation_and_a_broken_file_are_refused_in_one_line(tmp_path: Path)
     with pytest.raises(ValueError, match="orca.json: not an evaluation's metrics file"):
         _run(tmp_path, ("dense",), document)
     assert not (tmp_path / "summary.json").exists()
+
+
+def test_planners_without_their_episodes_are_refused_rather_than_their_gap_dropped(
+    tmp_path: Path,
+) -> None:
+    """A fresh clone has the metrics (git) but not the episodes (DVC's cache): the table would
+    lose the preset's paired gap without a word."""
+    success = np.ones(50)
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, success)
+    (tmp_path / "data" / "dense" / "cv-mpc.parquet").unlink()
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    with pytest.raises(ValueError) as error:
+        _run(tmp_path, ("dense",), document)
+    assert str(error.value) == (
+        f"{tmp_path / 'data' / 'dense' / 'cv-mpc.parquet'}: no such episodes file, and the paired "
+        "oracle-mpc − cv-mpc gap of dense needs it (dvc repro scenarios/dvc.yaml)"
+    )
+    assert not (tmp_path / "summary.json").exists()
