@@ -215,6 +215,27 @@ def test_a_model_of_another_world_is_used_only_in_a_transfer_evaluation(workdir:
     assert message == "robot 'orca' reads no model files: nothing to transfer"
 
 
+def test_predict_measures_a_preset_without_its_own_world_model_or_agent(
+    workdir: Path, made
+) -> None:
+    """--no-world-model --no-agent-policy: the planning model and the baselines under the
+    random policy only (where no VAE, LSTM or agent of the preset exists)."""
+    out = workdir / "p" / "prediction.json"
+    result = runner.invoke(
+        app,
+        ["predict", "--planning-model", str(made["p3"]), "--no-world-model",
+         "--no-agent-policy", "--set", "prediction.episodes=4", "--out", str(out),
+         "--figure", str(workdir / "p" / "prediction.png"), "--no-tracking"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    errors = json.loads(out.read_text())["policies"]
+    assert list(errors) == ["random"]
+    assert "planning-model" in errors["random"]["predictors"]
+    assert sorted(errors["random"]["predictors"]) == [
+        "constant-velocity", "copy-last", "planning-model", "static"  # no "vae-lstm"
+    ]
+
+
 def _without_env(source: Path, target: Path) -> Path:
     """``source`` as a file written before the scenarios (and a format version) were saved."""
     payload = torch.load(source, weights_only=True)

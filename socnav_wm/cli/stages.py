@@ -262,6 +262,13 @@ def predict(
         Path | None,
         typer.Option(help="Agent file of the ε-greedy policy (default: dueling-dqn seed 0)."),
     ] = LAYOUT.prediction_agent,
+    agent_policy: Annotated[
+        bool,
+        typer.Option(
+            help="Measure under --agent's ε-greedy policy too; --no-agent-policy: under the "
+            "random policy only (a preset without agents of its own)."
+        ),
+    ] = True,
     planning_model: Annotated[
         list[Path] | None,
         typer.Option(
@@ -272,6 +279,13 @@ def predict(
     out: Annotated[Path, typer.Option(help="The errors (JSON).")] = LAYOUT.prediction_metrics,
     figure: Annotated[Path, typer.Option(help="Error against k (PNG).")] = LAYOUT.prediction_figure,
     transfer: Annotated[bool, typer.Option(help=TRANSFER_HELP)] = False,
+    world_model: Annotated[
+        bool,
+        typer.Option(
+            help="Measure the paper's world model (--vae, --lstm); --no-world-model: only the "
+            "planning models and the baselines (a preset without a VAE + LSTM of its own)."
+        ),
+    ] = True,
 ) -> None:
     """k-step prediction errors in metres of the world model (VAE + LSTM) and the planning world
     model's seeds beside copy-last, static humans and constant velocity (the robot's own motion
@@ -285,9 +299,9 @@ def predict(
         planning_model = [LAYOUT.planning_model(s) for s in params.planning_model.seeds]
     result = stage.run(
         params,
-        vae=vae,
-        lstm=lstm,
-        agent=agent,
+        vae=vae if world_model else None,
+        lstm=lstm if world_model else None,
+        agent=agent if agent_policy else None,
         planning_models=planning_model,
         out=out,
         figure=figure,

@@ -22,8 +22,8 @@ from socnav_wm.worldmodel.prediction import error_table, evaluate_prediction
 def run(
     params: Params,
     *,
-    vae: Path,
-    lstm: Path,
+    vae: Path | None,
+    lstm: Path | None,
     agent: Path | None,
     planning_models: list[Path],
     out: Path,
@@ -33,12 +33,17 @@ def run(
 ) -> dict[str, Any]:
     """Measure with the ``prediction`` section's settings, write ``out`` and ``figure``
     together, log to MLflow; returns the errors. ``planning_models``: one file per training seed
-    of the planning world model. Every model is loaded first, and refused in one line when it
+    of the planning world model; ``vae`` and ``lstm`` None: without the paper's world model (a
+    preset that has none of its own). Every model is loaded first, and refused in one line when it
     was made for other scenarios than ``params.env`` (in another world, unless ``transfer``:
     then the errors say how the models transfer)."""
     check_writable(out, figure)
     planners = [load_residual(path, params.env, transfer=transfer) for path in planning_models]
-    world_model = load_vae_lstm(vae, lstm, env_params=params.env, transfer=transfer)
+    world_model = None
+    if vae is not None and lstm is not None:
+        world_model = load_vae_lstm(vae, lstm, env_params=params.env, transfer=transfer)
+    elif vae is not None or lstm is not None:
+        raise ValueError("the world model needs both --vae and --lstm")
     policy = (
         load_agent(agent, env_params=params.env, transfer=transfer) if agent is not None else None
     )

@@ -357,7 +357,7 @@ def evaluate_prediction(
     env_params: EnvParams,
     params: PredictionParams,
     *,
-    world_model: tuple[Any, Any],
+    world_model: tuple[Any, Any] | None,
     agent: Any | None,
     planning_models: Sequence[Any] = (),
     batch_size: int = 512,
