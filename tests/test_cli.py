@@ -84,6 +84,24 @@ def test_bench_env_gives_a_preset_per_policy_when_both_are_asked() -> None:
     assert len(rows) == 2 and "sfm" in rows[0] and "mixed" in rows[1]
 
 
+def test_bench_plan_of_a_preset_skips_the_models_of_another_in_one_line() -> None:
+    result = runner.invoke(
+        app,
+        ["bench", "plan", "--overlay", "configs/scenarios/crowd.yaml", "--batch", "1",
+         "--seconds", "0.1"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    skipped = [line for line in result.output.splitlines() if line.startswith("skipped")]
+    assert skipped == [
+        "skipped wm-mpc: models/planning/seed-0.pt: trained with 3 humans in a 10.0 m room; "
+        "the params have 10 humans in a 10.0 m room",
+        "skipped vae-lstm-mpc: models/vae.pt: trained with 3 humans in a 10.0 m room; "
+        "the params have 10 humans in a 10.0 m room",
+    ]
+    rows = [line for line in result.output.splitlines() if line.startswith("│")]
+    assert [row.split("│")[1].strip() for row in rows] == ["cv-mpc", "oracle-mpc"]
+
+
 def test_bench_env_rejects_an_unknown_human_policy() -> None:
     result = runner.invoke(app, ["bench", "env", "--humans", "robots"])
     assert result.exit_code == 2

@@ -149,7 +149,7 @@ def bench_train_command(
 
 
 @command("plan", group=bench_app)
-@shared_options("params", "set")
+@shared_options("params", "set", "overlay")
 def bench_plan_command(
     *,
     method: Annotated[
@@ -161,9 +161,15 @@ def bench_plan_command(
     ] = None,
     options: SharedOptions,
     seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per row (CPU-s).")] = 2.0,
+    planning_model: Annotated[
+        Path | None,
+        typer.Option(help="wm-mpc's planning model (another preset's: --overlay's) "
+                     f"[default: {LAYOUT.planning_model(0).as_posix()}]."),
+    ] = None,
 ) -> None:
     """Decisions per CPU-second of each planner, one core and one torch thread, at the shipped
-    batch (`eval.batch_size`) and at 1, 64 and 512 episodes planned together."""
+    batch (`eval.batch_size`) and at 1, 64 and 512 episodes planned together; `--overlay` a
+    scenario preset for its humans."""
     from socnav_wm.bench import PLAN_BATCH_SIZES, bench_plan, one_core
     from socnav_wm.method_names import PLANNER_NAMES
     from socnav_wm.methods import method as registered
@@ -175,11 +181,15 @@ def bench_plan_command(
                 f"--method: unknown {name!r}; expected one of {', '.join(PLANNER_NAMES)}"
             )
     methods = list(method or PLANNER_NAMES)
-    if not method:  # by default, skip the learned planners whose models are not there
-        for name in list(methods):
+    files = {"wm-mpc": {"planning_model": planning_model}} if planning_model else None
+    if not method:  # by default, skip the learned planners whose models are not there or are
+        for name in list(methods):  # another preset's (the loader's one line says which)
+            entry = registered(name)
             try:
-                registered(name).files()
-            except FileNotFoundError as exc:
+                entry.policies(
+                    config.env, files=entry.files((files or {}).get(name)), planning=config.planning
+                )
+            except (FileNotFoundError, ValueError) as exc:
                 typer.echo(f"skipped {name}: {exc}")
                 methods.remove(name)
     sizes = tuple(batch or sorted({config.eval.batch_size, *PLAN_BATCH_SIZES}))
@@ -187,7 +197,7 @@ def bench_plan_command(
     with one_core() as where:
         rows = bench_plan(
             tuple(methods), sizes, env_params=config.env, planning=config.planning,
-            seconds=seconds,
+            files=files, seconds=seconds,
         )  # fmt: skip
     print_table(
         rows,
