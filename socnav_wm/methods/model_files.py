@@ -90,7 +90,8 @@ def _describe(role: str, path: Path, env_params: EnvParams) -> str:
 
         model = load_residual(path, env_params)
         room = ", knows the room" if model.room_half is not None else ""
-        return f"planning model: {model.num_humans} humans{room}"
+        seen = f", sees the {model.neighbours} nearest" if model.neighbours else ""
+        return f"planning model: {model.num_humans} humans{seen}{room}"
     from socnav_wm.agents.agent_file import load_agent
 
     agent = load_agent(path, "cpu", env_params)

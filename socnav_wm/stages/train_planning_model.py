@@ -45,7 +45,9 @@ def run(
     with world_model_stage("train_planning_model", run_name, params, outputs, (rollouts,)) as stage:
         result = stage.fit(p.max_epochs, partial(fit_residual, rollouts, params.env, p, seed=seed))
         summary: dict[str, Any] = {"seed": seed, **result.metrics}
-        settings = {"seed": seed, **p.to_dict()}
+        # An option left unset (None) is not recorded, so that the files of the models trained
+        # before it existed (the paper preset's) stay byte-identical.
+        settings = {"seed": seed, **{k: v for k, v in p.to_dict().items() if v is not None}}
         stage.publish(lambda path: save_residual(path, result, settings), summary, result.history)
         stage.run.log_headline(
             {

@@ -93,6 +93,10 @@ class PlanningModelParams(Section):
     velocity's mean error at ``k`` (0: the plain mean, which the last steps' errors, 100× the
     first ones', decide alone; 1: every step relative to constant velocity; 0.5, between them,
     is better than constant velocity far ahead and as good near it: docs/worldmodel.md)."""
+    neighbours: int | None = Field(None, gt=0)
+    """How many other humans each human's correction sees: the K nearest, nearest first (what a
+    crowd needs: fixed slots by distance, and a cost that grows with K, not with the crowd), or
+    null: every other human in spawn order (the paper preset's 3 humans)."""
     room: bool = True
     """The model knows the room: each person's features include where it is in the room and
     how far ahead the area where goals are drawn ends (the robot's pose, known to a robot with

@@ -41,6 +41,9 @@ def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, An
             "dt": result.model.dt,
             "max_speed": result.model.max_speed,
             "room_half": result.model.room_half,
+            # Only a model that sees its K nearest records it: a file of the others stays
+            # byte for byte what it was before the option existed.
+            **({"neighbours": result.model.neighbours} if result.model.neighbours else {}),
             "settings": settings,
             "metrics": result.metrics,
             "env": result.env,
@@ -88,6 +91,7 @@ def load_residual(
             data["dt"],
             data.get("max_speed"),
             data.get("room_half"),
+            data.get("neighbours"),
         )
         model.load_state_dict(data["state_dict"])
     except (KeyError, TypeError, RuntimeError) as exc:

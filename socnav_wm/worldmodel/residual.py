@@ -139,6 +139,9 @@ class ResidualDynamics(nn.Module):
         room_half: the half-size (m) of the square where the humans' goals are drawn, for a
             model that knows the room (:func:`room_features`; every call then needs the
             robot's room pose), or None.
+        neighbours: how many other humans each human sees, nearest first (the K nearest, in
+            slots by distance, as social pooling does), or None: every other human in spawn
+            order (the paper preset's models). The robot always has its own slot.
     """
 
     def __init__(
@@ -148,14 +151,20 @@ class ResidualDynamics(nn.Module):
         dt: float,
         max_speed: float | None = None,
         room_half: float | None = None,
+        neighbours: int | None = None,
     ) -> None:
         super().__init__()
         self.num_humans, self.dt, self.max_speed = num_humans, dt, max_speed
         self.room_half = room_half
-        # Own speed, then (relative position, relative velocity) of each other human and the
-        # robot, the robot's turn per step and the steps imagined so far; with the room, its
-        # ROOM_FEATURES.
-        inputs = 1 + 4 * num_humans + 2 + (0 if room_half is None else ROOM_FEATURES)
+        if neighbours is not None and neighbours < 1:
+            raise ValueError(f"neighbours: expected at least 1 (or None), got {neighbours}")
+        self.neighbours = neighbours
+        seen = num_humans - 1 if neighbours is None else min(neighbours, num_humans - 1)
+        self.seen = max(seen, 0)
+        # Own speed, then (relative position, relative velocity) of each other human seen and
+        # of the robot, the robot's turn per step and the steps imagined so far; with the room,
+        # its ROOM_FEATURES.
+        inputs = 1 + 4 * (self.seen + 1) + 2 + (0 if room_half is None else ROOM_FEATURES)
         self.net = nn.Sequential(
             nn.Linear(inputs, hidden_dim),
             nn.Tanh(),
@@ -195,6 +204,12 @@ class ResidualDynamics(nn.Module):
         keep = ~torch.eye(h, h + 1, dtype=torch.bool, device=p.device)
         rel_p = rel_p[:, keep].reshape(-1, h, h, 2)
         rel_u = rel_u[:, keep].reshape(-1, h, h, 2)
+        if self.neighbours is not None:  # the K nearest others, nearest first; then the robot
+            distance = torch.linalg.vector_norm(rel_p[:, :, : h - 1].detach(), dim=-1)
+            order = torch.argsort(distance, dim=-1, stable=True)[..., : self.seen]
+            index = order[..., None].expand(-1, -1, -1, 2)
+            rel_p = torch.cat([rel_p[:, :, : h - 1].gather(2, index), rel_p[:, :, h - 1 :]], 2)
+            rel_u = torch.cat([rel_u[:, :, : h - 1].gather(2, index), rel_u[:, :, h - 1 :]], 2)
         cs, ss = c[..., None], s[..., None]
         rel = torch.cat([_rotate(rel_p, cs, ss), _rotate(rel_u, cs, ss)], dim=-1)
         turn = (omega * self.dt)[:, None, None].expand(-1, h, 1)
@@ -400,6 +415,7 @@ def train_residual(
             env_params.dt,
             env_params.human_max_speed,
             env_params.spawn_half_size if room else None,
+            params.neighbours,
         ),
     )
     if room and (train.pose is None or val.pose is None):

@@ -259,3 +259,31 @@ def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording
             no_poses, seqs[1], ENV, PlanningModelParams(hidden_dim=8, learning_rate=1e-3,
             batch_size=32, max_epochs=1, patience=1, relative_weight=0.0, room=True), seed=0,
         )  # fmt: skip
+
+
+def test_a_model_of_the_nearest_neighbours_ignores_the_order_and_the_far_humans(tmp_path) -> None:
+    """neighbours=K: each human sees the K nearest others, nearest first, then the robot, so
+    its correction does not depend on the others' spawn order nor on the humans beyond them;
+    the file keeps K."""
+    torch.manual_seed(0)
+    model = residual.ResidualDynamics(6, 16, 1.0, neighbours=2)
+    assert model.net[0].in_features == 1 + 4 * (2 + 1) + 2
+    with torch.no_grad():
+        model.net[-1].weight.normal_(0.0, 0.5)
+    points = torch.randn(5, 7, 2) * 2.0  # the goal, then 6 humans
+    velocity = torch.randn(5, 7, 2) * 0.1
+    v, omega = torch.full((5,), 0.1), torch.zeros(5)
+    out = model(points, velocity, v, omega)
+    order = torch.tensor([0, 3, 1, 6, 2, 5, 4])  # the humans shuffled, the goal first
+    shuffled = model(points[:, order], velocity[:, order], v, omega)
+    torch.testing.assert_close(shuffled, out[:, order[1:] - 1])
+    # Human 0 sees only its two nearest: moving a human beyond them changes nothing for it.
+    distance = torch.linalg.vector_norm(points[:, 2:] - points[:, 1:2], dim=-1)
+    far = int(distance[0].argmax()) + 2
+    moved = points.clone()
+    moved[0, far] += 0.5 * (points[0, far] - points[0, 1])  # further away along the same line
+    torch.testing.assert_close(model(moved, velocity, v, omega)[0, 0], out[0, 0])
+    path = tmp_path / "k.pt"
+    result = residual.ResidualTrainResult(model=model, history=[], metrics={})
+    planning_file.save_residual(path, result, {"seed": 0})
+    assert planning_file.load_residual(path).neighbours == 2
