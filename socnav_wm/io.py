@@ -368,6 +368,21 @@ def read_json(
         raise error(f"{path}: not valid JSON ({first_line(exc)})") from None
 
 
+def torch_bytes(payload: Any) -> bytes:
+    """``torch.save``'s archive of ``payload``, the same bytes for the same payload wherever it
+    is written. Saved to a file, torch names the archive's records after that file, and every
+    output here is first written under a temporary name (:func:`atomic_path`): the same model
+    would get other bytes, and another DVC hash, on every run. In memory it gets torch's one
+    name for unnamed archives."""
+    import io
+
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    return buffer.getvalue()
+
+
 def load_torch_file(
     path: str | os.PathLike[str], what: str, error: type[ValueError] = ValueError
 ) -> Any:

@@ -232,7 +232,10 @@ def test_predict_measures_a_preset_without_its_own_world_model_or_agent(
     assert list(errors) == ["random"]
     assert "planning-model" in errors["random"]["predictors"]
     assert sorted(errors["random"]["predictors"]) == [
-        "constant-velocity", "copy-last", "planning-model", "static"  # no "vae-lstm"
+        "constant-velocity",
+        "copy-last",
+        "planning-model",
+        "static",  # no "vae-lstm"
     ]
 
 

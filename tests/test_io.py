@@ -234,3 +234,37 @@ def test_outputs_together_publishes_all_or_none(tmp_path: Path) -> None:
         tb.write_text("new metrics")
         assert a.read_text() == "old model"  # nothing published before the block ends
     assert (a.read_text(), b.read_text()) == ("new model", "new metrics")
+
+
+def test_a_saved_model_has_the_same_bytes_whatever_its_temporary_name(tmp_path: Path) -> None:
+    """torch.save names an archive's records after the file; every model is written under a
+    temporary name first, so the bytes (and DVC's hash) must not depend on that name."""
+    import torch
+
+    from socnav_wm.io import atomic_path, torch_bytes
+
+    payload = {"format": "x", "weights": torch.arange(6.0).reshape(2, 3)}
+    for name in ("a.pt", "b.pt"):
+        with atomic_path(tmp_path / name) as tmp:
+            tmp.write_bytes(torch_bytes(payload))
+    assert (tmp_path / "a.pt").read_bytes() == (tmp_path / "b.pt").read_bytes()
+    loaded = torch.load(tmp_path / "a.pt", weights_only=True)
+    assert torch.equal(loaded["weights"], payload["weights"])
+
+
+def test_every_torch_save_of_the_package_is_torch_bytes() -> None:
+    import ast
+
+    root = Path(__file__).resolve().parents[1] / "socnav_wm"
+    callers = []
+    for path in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "save"
+                and isinstance(node.func.value, ast.Name)
+                and node.func.value.id == "torch"
+            ):
+                callers.append(path.name)
+    assert callers == ["io.py"]

@@ -24,7 +24,7 @@ from socnav_wm.devices import resolve_device
 from socnav_wm.env.episode import Episode
 from socnav_wm.env.params import EnvParams
 from socnav_wm.env.rollout import run_episodes
-from socnav_wm.io import atomic_path, first_line, load_saved
+from socnav_wm.io import atomic_path, first_line, load_saved, torch_bytes
 from socnav_wm.worldmodel.files import load_vae_lstm
 from socnav_wm.worldmodel.lstm import LatentLSTM
 from socnav_wm.worldmodel.vae import VAE
@@ -201,7 +201,7 @@ def save_agent(path: str | Path, result: TrainResult, extra: dict[str, Any] | No
         },
     }
     with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+        tmp.write_bytes(torch_bytes(payload))
 
 
 def load_agent(

@@ -9,12 +9,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from socnav_wm.agents.features import VARIANTS
 from socnav_wm.agents.params import AgentParams
 from socnav_wm.env.params import EnvParams
-from socnav_wm.io import atomic_path, load_saved
+from socnav_wm.io import atomic_path, load_saved, torch_bytes
 
 CHECKPOINT_FORMAT = "socnav-wm-agent-checkpoint"
 CHECKPOINT_FORMAT_VERSION = 5
@@ -77,7 +75,7 @@ def save_checkpoint(path: str | Path, identity: dict[str, Any], state: dict[str,
         "state": state,
     }
     with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+        tmp.write_bytes(torch_bytes(payload))
 
 
 class UnreadableCheckpoint(ValueError):

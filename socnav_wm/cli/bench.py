@@ -163,8 +163,10 @@ def bench_plan_command(
     seconds: Annotated[float, typer.Option(min=0.1, help="Timing budget per row (CPU-s).")] = 2.0,
     planning_model: Annotated[
         Path | None,
-        typer.Option(help="wm-mpc's planning model (another preset's: --overlay's) "
-                     f"[default: {LAYOUT.planning_model(0).as_posix()}]."),
+        typer.Option(
+            help="wm-mpc's planning model (another preset's: --overlay's) "
+            f"[default: {LAYOUT.planning_model(0).as_posix()}]."
+        ),
     ] = None,
 ) -> None:
     """Decisions per CPU-second of each planner, one core and one torch thread, at the shipped

@@ -24,7 +24,5 @@ def build(
     """The VAE ``files["vae"]`` and LSTM ``files["lstm"]`` (refused in one line when they were
     trained for other scenarios than ``env_params`` (in another world: unless ``transfer``), or
     do not fit together), a fresh copy for every batch."""
-    vae, lstm = load_vae_lstm(
-        files["vae"], files["lstm"], env_params=env_params, transfer=transfer
-    )
+    vae, lstm = load_vae_lstm(files["vae"], files["lstm"], env_params=env_params, transfer=transfer)
     return planner_policies(method, env_params, planning, lambda: VaeLstmModel(vae, lstm))

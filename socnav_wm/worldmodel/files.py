@@ -20,7 +20,7 @@ import torch
 from socnav_wm.data.compatibility import check_made_with, observation_record
 from socnav_wm.devices import resolve_device
 from socnav_wm.env.params import EnvParams
-from socnav_wm.io import ModelFileError, atomic_path, first_line, load_saved
+from socnav_wm.io import ModelFileError, atomic_path, first_line, load_saved, torch_bytes
 from socnav_wm.worldmodel.lstm import LatentLSTM
 from socnav_wm.worldmodel.training import LSTMTrainResult, VAETrainResult
 from socnav_wm.worldmodel.vae import VAE
@@ -59,7 +59,7 @@ def _save_model(
         "env": _plain(env) if env is not None else None,
     }
     with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+        tmp.write_bytes(torch_bytes(payload))
 
 
 def load_checkpoint(path: str | Path, kind: str) -> dict[str, Any]:

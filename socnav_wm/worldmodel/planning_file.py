@@ -16,11 +16,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from socnav_wm.data.compatibility import check_made_with
 from socnav_wm.env.params import EnvParams
-from socnav_wm.io import ModelFileError, check_format, first_line, load_torch_file
+from socnav_wm.io import ModelFileError, check_format, first_line, load_torch_file, torch_bytes
 from socnav_wm.worldmodel.residual import ResidualDynamics, ResidualTrainResult
 
 PLANNING_MODEL_FORMAT = "socnav-wm residual-cv"
@@ -31,25 +29,23 @@ WHAT = "planning model"
 def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, Any]) -> None:
     """The model's weights, what rebuilds it and the scenarios it was trained for
     (torch.save)."""
-    torch.save(
-        {
-            "format": PLANNING_MODEL_FORMAT,
-            "format_version": PLANNING_MODEL_FORMAT_VERSION,
-            "state_dict": result.model.state_dict(),
-            "num_humans": result.model.num_humans,
-            "hidden_dim": result.model.net[0].out_features,
-            "dt": result.model.dt,
-            "max_speed": result.model.max_speed,
-            "room_half": result.model.room_half,
-            # Only a model that sees its K nearest records it: a file of the others stays
-            # byte for byte what it was before the option existed.
-            **({"neighbours": result.model.neighbours} if result.model.neighbours else {}),
-            "settings": settings,
-            "metrics": result.metrics,
-            "env": result.env,
-        },
-        path,
-    )
+    payload = {
+        "format": PLANNING_MODEL_FORMAT,
+        "format_version": PLANNING_MODEL_FORMAT_VERSION,
+        "state_dict": result.model.state_dict(),
+        "num_humans": result.model.num_humans,
+        "hidden_dim": result.model.net[0].out_features,
+        "dt": result.model.dt,
+        "max_speed": result.model.max_speed,
+        "room_half": result.model.room_half,
+        # Only a model that sees its K nearest records it: the others' payload stays what it
+        # was before the option existed.
+        **({"neighbours": result.model.neighbours} if result.model.neighbours else {}),
+        "settings": settings,
+        "metrics": result.metrics,
+        "env": result.env,
+    }
+    Path(path).write_bytes(torch_bytes(payload))
 
 
 def _made_with(data: dict[str, Any]) -> dict[str, Any] | None:
