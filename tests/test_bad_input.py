@@ -239,6 +239,15 @@ def test_predict_measures_a_preset_without_its_own_world_model_or_agent(
     ]
 
 
+def test_collect_under_a_planner_is_refused_for_a_learned_one_or_a_lone_epsilon(
+    workdir: Path,
+) -> None:
+    message = refused(workdir, "collect", "--policy", "wm-mpc", "--out", "r", "--metrics", "r.json")
+    assert message == "--policy: expected random or one of cv-mpc, oracle-mpc, got 'wm-mpc'"
+    message = refused(workdir, "collect", "--epsilon", "0.3", "--out", "r", "--metrics", "r.json")
+    assert message == "--epsilon: only under a planner (--policy)"
+
+
 def _without_env(source: Path, target: Path) -> Path:
     """``source`` as a file written before the scenarios (and a format version) were saved."""
     payload = torch.load(source, weights_only=True)

@@ -12,7 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
-from socnav_wm.cli.application import command, print_table
+from socnav_wm.cli.application import UserError, command, print_table
 from socnav_wm.cli.options import (
     FrozenLstm,
     FrozenVae,
@@ -50,9 +50,39 @@ def collect(
     options: SharedOptions,
     out: Shards = LAYOUT.rollouts,
     metrics: CollectMetrics = LAYOUT.collect_metrics,
+    policy: Annotated[
+        str,
+        typer.Option(
+            help="random (the pipeline's), or a planner that needs no learned model (cv-mpc, "
+            "oracle-mpc): the data a planning model meets when it plans."
+        ),
+    ] = "random",
+    epsilon: Annotated[
+        float,
+        typer.Option(min=0.0, max=1.0, help="Under a planner: the share of random actions."),
+    ] = 0.0,
 ) -> None:
-    """Random-policy rollouts of the simulator into Parquet shards (stage `collect`)."""
-    run_stage("collect", options, out=out, metrics=metrics)
+    """Rollouts of the simulator into Parquet shards, under the random policy (stage
+    `collect`) or a planner's."""
+    planner = None
+    if policy != "random":
+        planner = (policy, _collecting_planner(policy, options))
+    elif epsilon:
+        raise UserError("--epsilon: only under a planner (--policy)")
+    run_stage("collect", options, out=out, metrics=metrics, planner=planner, epsilon=epsilon)
+
+
+def _collecting_planner(name: str, options: SharedOptions) -> Any:
+    """The policies of planner ``name`` for ``collect --policy`` (one line when it is not a
+    planner without model files)."""
+    from socnav_wm.method_names import PLANNER_NAMES
+    from socnav_wm.methods import method
+
+    chosen = [p for p in PLANNER_NAMES if not method(p).model_files]
+    if name not in chosen:
+        raise UserError(f"--policy: expected random or one of {', '.join(chosen)}, got {name!r}")
+    params = options.load()
+    return method(name).configured(params.env, {"planning": params.planning})
 
 
 @command("train-vae")

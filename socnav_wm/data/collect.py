@@ -1,10 +1,16 @@
-"""The ``collect`` stage: random-policy rollouts of the batched simulator into Parquet shards.
+"""The ``collect`` stage: rollouts of the batched simulator into Parquet shards, under the
+random policy or a planner's.
 
 Episode ``i`` of the dataset is scenario ``i`` of the seed, and its random actions are a pure
-function of ``(seed, i, t)`` too: the data does not depend on ``num_envs``, which only trades
-memory for speed. Slots keep running new scenarios until ``episodes`` have been handed out; each
-finished episode is copied out of the per-slot buffers and written whole (no row ever spans two
-episodes, no episode spans two shards).
+function of ``(seed, i, t)`` too: the random policy's data does not depend on ``num_envs``, which
+only trades memory for speed. Slots keep running new scenarios until ``episodes`` have been
+handed out; each finished episode is copied out of the per-slot buffers and written whole (no
+row ever spans two episodes, no episode spans two shards).
+
+Under a planner (``policy``: the data a planning model meets when it plans, as DAgger and
+iterative model-based RL collect it) each step takes the planner's action, or with probability
+``epsilon`` (a coin keyed by ``(seed, i, t)``) the random one. A planner's policy serves
+episodes that start together, so the slots run in waves of ``num_envs`` scenarios.
 """
 
 from __future__ import annotations
@@ -13,6 +19,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numba
 import numpy as np
@@ -27,6 +34,9 @@ from socnav_wm.env.state import COLLISION_NONE
 STREAM_RANDOM_POLICY = 100
 """Counter-based stream of the collector's actions (distinct from the simulator's streams)."""
 
+STREAM_EXPLORE = 101
+"""Counter-based stream of the coin that picks the random action under a planner."""
+
 WRITE_EVERY_ROWS = 100_000
 """Finished episodes are buffered and handed to the Parquet writer in chunks of this size."""
 
@@ -37,6 +47,21 @@ def random_actions(seed: int, scenario_id: np.ndarray, step: np.ndarray, out: np
     for e in range(out.shape[0]):
         u = uniform(seed, scenario_id[e], STREAM_RANDOM_POLICY, step[e], 0, 0)
         out[e] = min(int(u * NUM_ACTIONS), NUM_ACTIONS - 1)
+
+
+@numba.njit(cache=True)
+def explore_coins(
+    seed: int, scenario_id: np.ndarray, step: np.ndarray, epsilon: float, out: np.ndarray
+) -> None:
+    """Whether each env takes the random action at this step, probability ``epsilon``, keyed
+    by (seed, scenario, step)."""
+    for e in range(out.shape[0]):
+        out[e] = uniform(seed, scenario_id[e], STREAM_EXPLORE, step[e], 0, 0) < epsilon
+
+
+PlannerFactory = Callable[[], tuple[Callable[[Any], np.ndarray], bool]]
+"""A fresh planner policy for episodes that start together, and whether it reads the simulator
+(else the observations): what :mod:`socnav_wm.methods` builds."""
 
 
 @dataclass(frozen=True)
@@ -129,8 +154,11 @@ def collect_rollouts(
     out_dir: str | Path,
     max_rows_per_shard: int,
     on_episodes: Callable[[int], None] | None = None,
+    planner: PlannerFactory | None = None,
+    epsilon: float = 0.0,
 ) -> CollectSummary:
-    """Record ``episodes`` random-policy episodes (scenarios ``0..episodes−1`` of ``seed``).
+    """Record ``episodes`` episodes (scenarios ``0..episodes−1`` of ``seed``) under the random
+    policy or, given ``planner``, under its policy with a share ``epsilon`` of random actions.
 
     ``on_episodes(n)`` is called with the number of episodes finished since the last call
     (progress bars). Shards are written atomically; on an exception none of this run's shards
@@ -138,6 +166,8 @@ def collect_rollouts(
     """
     if episodes < 1 or num_envs < 1:
         raise ValueError("episodes and num_envs must be >= 1")
+    if not 0.0 <= epsilon <= 1.0:
+        raise ValueError(f"epsilon: expected a probability in [0, 1], got {epsilon}")
     if env_params.num_observed_humans != env_params.num_humans or env_params.observed_obstacles:
         raise ValueError(
             "env.observed_humans, env.observed_obstacles: rollouts hold every human in spawn "
@@ -150,17 +180,29 @@ def collect_rollouts(
     obs = sim.observation
     buffers = _EpisodeBuffers(num_envs, env_params.max_steps, sim.obs_dim, env_params.num_humans)
     actions = np.zeros(num_envs, np.int64)
+    explore = np.zeros(num_envs, np.bool_)
+    act, reads_simulator = planner() if planner is not None else (None, False)
     outcomes = np.zeros(4, np.int64)  # success, human, wall, timeout
     lengths = 0
     finished = 0
     with ShardWriter(
         out_dir, env_params.num_humans, max_rows_per_shard, env=made_with(env_params)
     ) as writer:
-        while not sim.state.done.all():
+        while True:
             s = sim.state
+            if s.done.all():  # a planner's next wave (the random policy hands out per slot)
+                if planner is None or sim.next_scenario >= episodes:
+                    break
+                obs = sim.autoreset(np.arange(num_envs), limit=episodes - sim.next_scenario)
+                act, reads_simulator = planner()
+                continue
             running = np.flatnonzero(~s.done)
             t = s.step_count[running]
             random_actions(seed, s.scenario_id, s.step_count, actions)
+            if act is not None:
+                planned = np.asarray(act(sim if reads_simulator else obs), dtype=np.int64)
+                explore_coins(seed, s.scenario_id, s.step_count, epsilon, explore)
+                actions = np.where(explore, actions, planned)
             buffers.obs[running, t] = obs[running]
             buffers.action[running, t] = actions[running]
             result = sim.step(actions)
@@ -185,7 +227,10 @@ def collect_rollouts(
             if len(ended) and on_episodes is not None:
                 on_episodes(len(ended))
             # Hand out new scenarios only while the dataset still needs episodes.
-            obs = sim.autoreset(ended, limit=episodes - sim.next_scenario)
+            if planner is None:
+                obs = sim.autoreset(ended, limit=episodes - sim.next_scenario)
+            else:
+                obs = sim.observation
             if buffers.done_rows >= WRITE_EVERY_ROWS:
                 writer.write(buffers.drain())
         if buffers.done:

@@ -1,11 +1,12 @@
-"""Stage ``collect``: random-policy rollouts of the simulator into Parquet shards."""
+"""Stage ``collect``: rollouts of the simulator into Parquet shards, under the random policy
+(the pipeline's) or a planner's (``planner``: its name and policies, built by the caller)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from socnav_wm.config import Params
-from socnav_wm.data.collect import collect_rollouts
+from socnav_wm.data.collect import PlannerFactory, collect_rollouts
 from socnav_wm.env.observation_layout import observation_size
 from socnav_wm.io import check_writable, outputs_together, write_json_atomic
 from socnav_wm.progress import progress
@@ -20,6 +21,8 @@ def run(
     metrics: Path,
     tracking: bool = True,
     quiet: bool = True,
+    planner: tuple[str, PlannerFactory] | None = None,
+    epsilon: float = 0.0,
 ) -> str:
     c = params.collect
     check_writable(out, metrics, folders=(out,))
@@ -42,12 +45,18 @@ def run(
                 out_dir=staging,
                 max_rows_per_shard=c.max_rows_per_shard,
                 on_episodes=bar.advance,
+                planner=None if planner is None else planner[1],
+                epsilon=epsilon,
             )
             save_stage_params("collect", params, staging / "params.yaml")
-            write_json_atomic(metrics_tmp, summary.as_metrics())
+            policy = {} if planner is None else {"policy": planner[0], "epsilon": epsilon}
+            write_json_atomic(metrics_tmp, {**summary.as_metrics(), **policy})
         run.log_metrics(summary.as_metrics())
+        if planner is not None:
+            run.log_params(policy)
         run.log_artifact(out / "params.yaml")
+    under = "" if planner is None else f" under {planner[0]} (ε = {epsilon:g})"
     return (
-        f"wrote {summary.episodes} episodes, {summary.steps} steps in {len(summary.shards)} "
-        f"shard(s) to {out} ({summary.steps / summary.seconds:,.0f} steps/s)"
+        f"wrote {summary.episodes} episodes{under}, {summary.steps} steps in "
+        f"{len(summary.shards)} shard(s) to {out} ({summary.steps / summary.seconds:,.0f} steps/s)"
     )
