@@ -37,11 +37,15 @@ class PlanningModel(Protocol):
         """The real step: ``actions`` (N,) were executed, then ``obs`` (N, obs_dim) was seen."""
         ...
 
-    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
+    def rollout(
+        self, repeats: int, pose: np.ndarray | None = None, rows: np.ndarray | None = None
+    ) -> Rollout:
         """``repeats`` futures per episode, episode-major (episode ``n``'s are rows
-        ``n·repeats … (n+1)·repeats − 1``). ``pose`` (N, 3): the robot's room pose (x, y, θ)
-        when the planner knows it (``planning.walls``), for a model that uses the room; a model
-        that does not ignores it."""
+        ``n·repeats … (n+1)·repeats − 1``), of the episodes ``rows`` (indices, in that order;
+        None: every episode). ``pose`` (len(rows), 3): their robot's room pose (x, y, θ) when
+        the planner knows it (``planning.walls``), for a model that uses the room; a model that
+        does not ignores it. An episode's futures do not depend on which others are imagined
+        with it."""
         ...
 
 
@@ -87,9 +91,12 @@ class ConstantVelocityModel:
         self._velocity = human_velocities(self._obs, obs, actions, self.params)
         self._obs, self._points = obs, positions(obs)
 
-    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
+    def rollout(
+        self, repeats: int, pose: np.ndarray | None = None, rows: np.ndarray | None = None
+    ) -> Rollout:
+        chosen = slice(None) if rows is None else rows
         return _ConstantVelocityRollout(
-            np.repeat(self._points, repeats, axis=0),
-            np.repeat(self._velocity, repeats, axis=0),
+            np.repeat(self._points[chosen], repeats, axis=0),
+            np.repeat(self._velocity[chosen], repeats, axis=0),
             self.params,
         )

@@ -173,16 +173,18 @@ class Planner:
         goal_now: np.ndarray,
         pose: np.ndarray | None = None,
         obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        rows: np.ndarray | None = None,
     ) -> np.ndarray:
         """(N, candidates) predicted returns from the model's present, where the goal is at
         ``goal_now`` (N, 2) in the robot frame; candidate ``p · len(continuations) + c`` is
         prefix ``p`` followed by continuation ``c``. With ``pose`` (N, 3: the robot's x, y, θ
         in the room), touching a wall is a collision, and so is touching one of ``obstacles``
-        (each episode's tables and plants: kinds (N, O), centres (N, O, 2), half sizes)."""
+        (each episode's tables and plants: kinds (N, O), centres (N, O, 2), half sizes).
+        ``rows``: the model's episodes these are (indices; None: all of them, in order)."""
         p, e = self.params, self.env_params
         num_episodes = len(goal_now)
         s = self.num_candidates
-        rollout = self.model.rollout(s, pose)
+        rollout = self.model.rollout(s, pose, rows)
         batch = num_episodes * s
         score = np.zeros(batch)
         alive = np.ones(batch, dtype=bool)
@@ -223,13 +225,32 @@ class Planner:
         obs: np.ndarray,
         pose: np.ndarray | None = None,
         obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        running: np.ndarray | None = None,
     ) -> np.ndarray:
         """The first action (N,) of each episode's best candidate, from the model's present
         (whose observation is ``obs``; ``pose`` (N, 3): the robot's in the room, for the
-        walls; ``obstacles``: the room's tables and plants)."""
-        scores = self.scores(np.asarray(obs, dtype=np.float64)[:, :2], pose, obstacles)
-        best = scores.argmax(axis=1)  # the first of equal scores
-        first = self.prefixes[best // len(self.params.continuations), 0]
+        walls; ``obstacles``: the room's tables and plants). With ``running`` (N,) bool, only
+        those episodes are planned (an ended one gets action 0, which nothing executes): the
+        same actions for them, at the cost of the episodes still running."""
+        goal = np.asarray(obs, dtype=np.float64)[:, :2]
+        first = np.zeros(len(goal), dtype=np.int64)
+        rows = None if running is None or running.all() else np.flatnonzero(running)
+        if rows is None:
+            scores = self.scores(goal, pose, obstacles)
+        elif len(rows):
+            scores = self.scores(
+                goal[rows],
+                None if pose is None else pose[rows],
+                None if obstacles is None else tuple(a[rows] for a in obstacles),
+                rows,
+            )
+        if rows is None or len(rows):
+            best = scores.argmax(axis=1)  # the first of equal scores
+            chosen = self.prefixes[best // len(self.params.continuations), 0]
+            if rows is None:
+                first = chosen
+            else:
+                first[rows] = chosen
         return first if self.commands is None else self.commands[first]
 
     @property
@@ -250,12 +271,13 @@ class Planner:
             obs: np.ndarray,
             pose: np.ndarray | None = None,
             obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+            running: np.ndarray | None = None,
         ) -> np.ndarray:
             if last:
                 self.model.observe(obs, last[0])
             else:
                 self.model.reset(obs)
-            actions = self.act(obs, pose, obstacles)
+            actions = self.act(obs, pose, obstacles, running)
             last[:] = [actions]
             return actions
 
@@ -263,6 +285,9 @@ class Planner:
             return act
 
         def localised(sim: Any) -> np.ndarray:
-            return act(sim.observation, sim.state.robot_pose(), obstacle_map(sim.state))
+            # The ended episodes wait for the batch's last one: only the running are planned.
+            return act(
+                sim.observation, sim.state.robot_pose(), obstacle_map(sim.state), ~sim.state.done
+            )
 
         return localised

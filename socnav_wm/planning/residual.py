@@ -57,7 +57,10 @@ class ResidualPlanningModel(ConstantVelocityModel):
         self.net = copy.deepcopy(model).float().eval()
         self.table = torch.as_tensor(discrete_commands(params), dtype=torch.float32)
 
-    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
+    def rollout(
+        self, repeats: int, pose: np.ndarray | None = None, rows: np.ndarray | None = None
+    ) -> Rollout:
+        chosen = slice(None) if rows is None else rows
         if self.net.room_half is not None and pose is None:
             raise ValueError(
                 "wm-mpc: its planning model knows the room and needs the robot's pose "
@@ -65,8 +68,8 @@ class ResidualPlanningModel(ConstantVelocityModel):
             )
         return _ResidualRollout(
             self.net,
-            np.repeat(self._points, repeats, axis=0),
-            np.repeat(self._velocity, repeats, axis=0),
+            np.repeat(self._points[chosen], repeats, axis=0),
+            np.repeat(self._velocity[chosen], repeats, axis=0),
             None if pose is None else np.repeat(np.asarray(pose), repeats, axis=0),
             self.table,
         )

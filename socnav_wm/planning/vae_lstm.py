@@ -65,8 +65,12 @@ class VaeLstmModel:
             _, self._state = self.lstm.step(self._latent, a, self._state)
             self._latent = self._encode(obs)
 
-    def rollout(self, repeats: int, pose: np.ndarray | None = None) -> Rollout:
+    def rollout(
+        self, repeats: int, pose: np.ndarray | None = None, rows: np.ndarray | None = None
+    ) -> Rollout:
+        chosen = slice(None) if rows is None else torch.as_tensor(rows, dtype=torch.long)
         state = None
         if self._state is not None:
-            state = tuple(x.repeat_interleave(repeats, dim=0) for x in self._state)
-        return _LatentRollout(self, self._latent.repeat_interleave(repeats, dim=0), state)
+            state = tuple(x[chosen].repeat_interleave(repeats, dim=0) for x in self._state)
+        latent = self._latent[chosen].repeat_interleave(repeats, dim=0)
+        return _LatentRollout(self, latent, state)

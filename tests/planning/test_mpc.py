@@ -103,7 +103,7 @@ def test_a_planner_that_knows_the_walls_counts_a_wall_contact_as_a_collision() -
     assert np.all(planner.scores(np.array([[0.0, -2.0]])) == 0.0)
 
 
-def test_the_walls_policy_reads_only_the_observation_the_pose_and_the_map() -> None:
+def test_the_walls_policy_reads_only_the_observation_the_pose_the_map_and_what_runs() -> None:
     far = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]
     half = ENV.wall_half_size - ENV.robot_radius
     # Facing the wall 0.1 m from touching it, the goal straight ahead beyond it: progress says
@@ -111,6 +111,7 @@ def test_the_walls_policy_reads_only_the_observation_the_pose_and_the_map() -> N
     state = SimpleNamespace(
         robot_pose=lambda: np.array([[half - 0.1, 0.0, 0.0]]),
         obstacle_kind=np.zeros((1, 0), dtype=np.int8),
+        done=np.zeros(1, dtype=bool),
     )
     sim = SimpleNamespace(observation=observation((1.0, 0.0), far), state=state)
     blind = Planner(ConstantVelocityModel(ENV), PlanningParams(walls=False), ENV)
@@ -118,6 +119,40 @@ def test_the_walls_policy_reads_only_the_observation_the_pose_and_the_map() -> N
     assert seeing.reads_simulator and not blind.reads_simulator
     assert blind.policy()(sim.observation).tolist() == [FORWARD]
     assert seeing.policy()(sim).tolist() != [FORWARD]
+
+
+@pytest.mark.parametrize("method", ["cv-mpc", "wm-mpc", "vae-lstm-mpc"])
+def test_only_the_running_episodes_are_planned_and_their_actions_do_not_change(method) -> None:
+    """An ended episode waits for the batch's last one: planning it costs time and changes
+    nothing, so the running ones' actions are those of planning every episode."""
+    from socnav_wm.env.core import Simulator
+    from socnav_wm.methods import method as registered
+
+    params = PlanningParams(horizon=4, prefix_length=1)
+    factory = registered(method).policies(ENV, planning=params)
+    sim = Simulator(6, ENV)
+    sim.reset(seed=11)
+    every, _ = factory()
+    some, _ = factory()
+    running = np.array([True, False, True, True, False, True])
+    for _ in range(4):
+        full = every(SimpleNamespace(observation=sim.observation, state=_state(sim, None)))
+        part = some(SimpleNamespace(observation=sim.observation, state=_state(sim, running)))
+        assert np.array_equal(part[running], full[running])
+        assert np.all(part[~running] == 0)
+        sim.step(full)
+
+
+def _state(sim, running):
+    """The simulator's state as a planner reads it, with ``running`` episodes (None: all)."""
+    done = np.zeros(sim.num_envs, dtype=bool) if running is None else ~running
+    return SimpleNamespace(
+        robot_pose=sim.state.robot_pose,
+        obstacle_kind=sim.state.obstacle_kind,
+        obstacle_xy=sim.state.obstacle_xy,
+        obstacle_half=sim.state.obstacle_half,
+        done=done,
+    )
 
 
 def test_cv_mpc_evaluation_runs_once_without_a_training_seed() -> None:
