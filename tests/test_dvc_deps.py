@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_dvc_yaml_lists_exactly_the_sources_each_stage_executes() -> None:
     assert dvc_yaml_differences(ROOT / "dvc.yaml") == []
     assert dvc_yaml_differences(ROOT / "studies" / "dvc.yaml") == []
+    assert dvc_yaml_differences(ROOT / "scenarios" / "dvc.yaml") == []
 
 
 def test_the_studies_are_a_pipeline_of_their_own() -> None:
@@ -61,6 +62,16 @@ def test_a_missing_or_extra_dependency_is_reported(tmp_path: Path) -> None:
     assert any("evaluate_baseline: missing socnav_wm/env/reward.py" in p for p in problems)
     assert any("collect: missing nothing; not executed socnav_wm/evaluation/figures.py" in p
                for p in problems)  # fmt: skip
+
+
+def test_a_stage_the_deps_table_does_not_know_is_reported(tmp_path: Path) -> None:
+    spec = yaml.safe_load((ROOT / "dvc.yaml").read_text())
+    spec["stages"]["my_stage"] = {"cmd": "socnav-wm collect", "deps": ["params.yaml"]}
+    (tmp_path / "dvc.yaml").write_text(yaml.safe_dump(spec))
+    assert dvc_yaml_differences(tmp_path / "dvc.yaml") == [
+        f"{tmp_path / 'dvc.yaml'}: stage my_stage: not in socnav_wm/stages/deps.py's "
+        "STAGE_MODULES (its sources cannot be checked)"
+    ]
 
 
 def test_the_closure_follows_imports_inside_functions_and_packages() -> None:

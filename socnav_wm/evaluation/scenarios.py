@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +21,7 @@ from socnav_wm.io import read_json
 
 __all__ = [
     "PUBLISHED",
+    "LEARNED_METHODS",
     "SCENARIO_METHODS",
     "TABLE_METRICS",
     "Published",
@@ -30,6 +31,11 @@ __all__ = [
 
 SCENARIO_METHODS: tuple[str, ...] = ("orca", "sfm", "cv-mpc", "oracle-mpc")
 """The non-learning methods evaluated in every preset, in the table's order."""
+
+LEARNED_METHODS: tuple[str, ...] = ("wm-mpc",)
+"""The planners on a model learned in the preset (scenarios/dvc.yaml's presets with one), after
+the others in the table, and compared with ``cv-mpc`` and ``oracle-mpc``, where they were
+evaluated."""
 
 TABLE_METRICS: tuple[tuple[str, str], ...] = (
     ("success", "success"),
@@ -100,6 +106,9 @@ class ScenarioTable:
     """preset → the paired ``oracle-mpc`` − ``cv-mpc`` success difference (points)."""
     missing: list[str]
     """``preset/method`` pairs without a metrics file."""
+    learned: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    """preset → learned planner → its paired success difference (points) from ``cv-mpc``
+    (``versus_physics``) and from ``oracle-mpc`` (``versus_oracle``)."""
 
     def markdown(self) -> str:
         """The per-preset table, the gaps and the published comparisons, as markdown."""
@@ -126,6 +135,21 @@ class ScenarioTable:
                 f"| `{preset}` | {gap['difference']:+.1f} [{gap['low']:+.1f}, "
                 f"{gap['high']:+.1f}] | {_p(gap['p_value'])} | {verdict} |"
             )
+        if self.learned:
+            lines += [
+                "",
+                "| preset | planner | − `cv-mpc` (points, paired) | p | − `oracle-mpc` (points, "
+                "paired) | p |",
+                "|---|---|---|---|---|---|",
+            ]
+            for preset, planners in self.learned.items():
+                for name, versus in planners.items():
+                    a, b = versus["versus_physics"], versus["versus_oracle"]
+                    lines.append(
+                        f"| `{preset}` | `{name}` | {a['difference']:+.1f} [{a['low']:+.1f}, "
+                        f"{a['high']:+.1f}] | {_p(a['p_value'])} | {b['difference']:+.1f} "
+                        f"[{b['low']:+.1f}, {b['high']:+.1f}] | {_p(b['p_value'])} |"
+                    )
         published = self.published_rows()
         if published:
             lines += [
@@ -156,7 +180,12 @@ class ScenarioTable:
         return rows
 
     def to_dict(self) -> dict[str, Any]:
-        return {"summaries": self.summaries, "gaps": self.gaps, "missing": self.missing}
+        return {
+            "summaries": self.summaries,
+            "gaps": self.gaps,
+            "missing": self.missing,
+            "learned": self.learned,
+        }
 
 
 def _cell(metric: str, summary: Mapping[str, float] | None) -> str:
@@ -183,13 +212,15 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     """
     summaries: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     gaps: dict[str, dict[str, Any]] = {}
+    learned: dict[str, dict[str, dict[str, Any]]] = {}
     missing: list[str] = []
     for preset in presets:
         methods: dict[str, dict[str, dict[str, float]]] = {}
-        for method in SCENARIO_METHODS:
+        for method in SCENARIO_METHODS + LEARNED_METHODS:
             path = metrics_dir / preset / f"{method}.json"
             if not path.is_file():
-                missing.append(f"{preset}/{method}")
+                if method in SCENARIO_METHODS:  # a learned planner is where it was trained
+                    missing.append(f"{preset}/{method}")
                 continue
             content = read_json(path)
             if not isinstance(content, dict) or not isinstance(content.get("metrics"), dict):
@@ -209,17 +240,37 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                         f"{path}: no such episodes file, and the paired oracle-mpc − cv-mpc gap "
                         f"of {preset} needs it (dvc repro scenarios/dvc.yaml)"
                     )
-            result = compare(pq.read_table(oracle), pq.read_table(physics), "success")
-            gaps[preset] = {
-                "difference": 100 * result.difference,
-                "low": 100 * result.low,
-                "high": 100 * result.high,
-                "p_value": result.p_value,
-                "scenarios": result.num_scenarios,
-                "room": 100 * result.difference >= GAP_POINTS and result.low > 0,
-            }
+            gaps[preset] = _paired(oracle, physics)
+            gaps[preset]["room"] = (
+                gaps[preset]["difference"] >= GAP_POINTS and gaps[preset]["low"] > 0
+            )
+            for name in LEARNED_METHODS:
+                if name not in methods:
+                    continue
+                episodes = episodes_dir / preset / f"{name}.parquet"
+                if not episodes.is_file():
+                    raise ValueError(
+                        f"{episodes}: no such episodes file, and the paired {name} − cv-mpc "
+                        f"difference of {preset} needs it (dvc repro scenarios/dvc.yaml)"
+                    )
+                learned.setdefault(preset, {})[name] = {
+                    "versus_physics": _paired(episodes, physics),
+                    "versus_oracle": _paired(episodes, oracle),
+                }
     if not summaries:
         raise ValueError(
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
-    return ScenarioTable(summaries, gaps, missing)
+    return ScenarioTable(summaries, gaps, missing, learned)
+
+
+def _paired(first: Path, second: Path) -> dict[str, Any]:
+    """The paired success difference ``first`` − ``second`` (episodes files), in points."""
+    result = compare(pq.read_table(first), pq.read_table(second), "success")
+    return {
+        "difference": 100 * result.difference,
+        "low": 100 * result.low,
+        "high": 100 * result.high,
+        "p_value": result.p_value,
+        "scenarios": result.num_scenarios,
+    }

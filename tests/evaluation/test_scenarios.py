@@ -112,3 +112,28 @@ def test_planners_without_their_episodes_are_refused_rather_than_their_gap_dropp
         "oracle-mpc − cv-mpc gap of dense needs it (dvc repro scenarios/dvc.yaml)"
     )
     assert not (tmp_path / "summary.json").exists()
+
+
+def test_a_learned_planner_is_compared_with_physics_and_the_oracle_where_it_was_trained(
+    tmp_path: Path,
+) -> None:
+    rng = np.random.default_rng(1)
+    physics = (rng.random(200) < 0.8).astype(float)
+    oracle = np.ones(200)
+    learned = physics.copy()
+    learned[np.flatnonzero(physics == 0)[:20]] = 1.0  # saves 20 of cv-mpc's failures
+    for method in SCENARIO_METHODS:
+        success = oracle if method == "oracle-mpc" else physics
+        _write(tmp_path, "dense", method, success)
+        _write(tmp_path, "easy", method, success)
+    _write(tmp_path, "dense", "wm-mpc", learned)  # trained in dense only
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    line = _run(tmp_path, ("dense", "easy"), document)
+    assert "missing" not in line  # no wm-mpc in easy is not a gap in the table
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert list(summary["learned"]) == ["dense"]
+    versus = summary["learned"]["dense"]["wm-mpc"]
+    assert versus["versus_physics"]["difference"] == pytest.approx(10.0)
+    assert versus["versus_oracle"]["difference"] == pytest.approx(100 * (learned.mean() - 1))
+    assert "| `dense` | `wm-mpc` | +10.0 [" in document.read_text()
