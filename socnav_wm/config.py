@@ -397,6 +397,9 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "study_sort_humans": ("env", "eval", "agent", "studies.sort_humans"),
     "scenario_robots": ("env", "eval", "baselines"),
     "scenario_planners": ("env", "eval", "planning"),
+    "scenario_collect": ("seed", "env", "collect"),
+    "scenario_planning_model": ("env", "planning_model"),
+    "scenario_wm_mpc": ("env", "eval", "planning"),
     "scenarios_report": (),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
