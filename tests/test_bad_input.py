@@ -246,6 +246,14 @@ def test_collect_under_a_planner_is_refused_for_a_learned_one_or_a_lone_epsilon(
     assert message == "--policy: expected random or one of cv-mpc, oracle-mpc, got 'wm-mpc'"
     message = refused(workdir, "collect", "--epsilon", "0.3", "--out", "r", "--metrics", "r.json")
     assert message == "--epsilon: only under a planner (--policy)"
+    lattice = ("--set", "planning.actions=lattice", "--set", "planning.prefix_length=1")
+    message = refused(
+        workdir, "collect", "--policy", "cv-mpc", *lattice, "--out", "r", "--metrics", "r.json"
+    )
+    assert message == (
+        "--policy: the rollouts hold the paper's four actions; planning.actions must be paper, "
+        "not a lattice"
+    )
 
 
 def _without_env(source: Path, target: Path) -> Path:

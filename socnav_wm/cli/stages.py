@@ -82,6 +82,11 @@ def _collecting_planner(name: str, options: SharedOptions) -> Any:
     if name not in chosen:
         raise UserError(f"--policy: expected random or one of {', '.join(chosen)}, got {name!r}")
     params = options.load()
+    if params.planning.resolved(name).actions != "paper":
+        raise UserError(
+            "--policy: the rollouts hold the paper's four actions; planning.actions must be "
+            "paper, not a lattice"
+        )
     return method(name).configured(params.env, {"planning": params.planning})
 
 

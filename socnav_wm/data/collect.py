@@ -7,7 +7,7 @@ only trades memory for speed. Slots keep running new scenarios until ``episodes`
 handed out; each finished episode is copied out of the per-slot buffers and written whole (no
 row ever spans two episodes, no episode spans two shards).
 
-Under a planner (``policy``: the data a planning model meets when it plans, as DAgger and
+Under a planner (``planner``: the data a planning model meets when it plans, as DAgger and
 iterative model-based RL collect it) each step takes the planner's action, or with probability
 ``epsilon`` (a coin keyed by ``(seed, i, t)``) the random one. A planner's policy serves
 episodes that start together, so the slots run in waves of ``num_envs`` scenarios.
