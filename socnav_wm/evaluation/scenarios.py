@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from socnav_wm.evaluation.comparisons import compare
@@ -231,15 +232,10 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             methods[method] = {m: content["metrics"][m] for m, _ in TABLE_METRICS}
         if methods:
             summaries[preset] = methods
-        oracle = episodes_dir / preset / "oracle-mpc.parquet"
-        physics = episodes_dir / preset / "cv-mpc.parquet"
         if "oracle-mpc" in methods and "cv-mpc" in methods:
-            for path in (oracle, physics):
-                if not path.is_file():
-                    raise ValueError(
-                        f"{path}: no such episodes file, and the paired oracle-mpc − cv-mpc gap "
-                        f"of {preset} needs it (dvc repro scenarios/dvc.yaml)"
-                    )
+            gap = f"oracle-mpc − cv-mpc gap of {preset}"
+            oracle = _episodes(episodes_dir / preset / "oracle-mpc.parquet", gap)
+            physics = _episodes(episodes_dir / preset / "cv-mpc.parquet", gap)
             gaps[preset] = _paired(oracle, physics)
             gaps[preset]["room"] = (
                 gaps[preset]["difference"] >= GAP_POINTS and gaps[preset]["low"] > 0
@@ -247,12 +243,10 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             for name in LEARNED_METHODS:
                 if name not in methods:
                     continue
-                episodes = episodes_dir / preset / f"{name}.parquet"
-                if not episodes.is_file():
-                    raise ValueError(
-                        f"{episodes}: no such episodes file, and the paired {name} − cv-mpc "
-                        f"difference of {preset} needs it (dvc repro scenarios/dvc.yaml)"
-                    )
+                episodes = _episodes(
+                    episodes_dir / preset / f"{name}.parquet",
+                    f"{name} − cv-mpc difference of {preset}",
+                )
                 learned.setdefault(preset, {})[name] = {
                     "versus_physics": _paired(episodes, physics),
                     "versus_oracle": _paired(episodes, oracle),
@@ -264,9 +258,20 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     return ScenarioTable(summaries, gaps, missing, learned)
 
 
-def _paired(first: Path, second: Path) -> dict[str, Any]:
-    """The paired success difference ``first`` − ``second`` (episodes files), in points."""
-    result = compare(pq.read_table(first), pq.read_table(second), "success")
+def _episodes(path: Path, needed_by: str) -> pa.Table:
+    """An evaluation's episodes, read once per preset; one line naming the file and what needs
+    it when it is not there (a fresh clone has the metrics, DVC's cache the episodes)."""
+    if not path.is_file():
+        raise ValueError(
+            f"{path}: no such episodes file, and the paired {needed_by} needs it "
+            "(dvc repro scenarios/dvc.yaml)"
+        )
+    return pq.read_table(path)
+
+
+def _paired(first: pa.Table, second: pa.Table) -> dict[str, Any]:
+    """The paired success difference ``first`` − ``second`` (episodes tables), in points."""
+    result = compare(first, second, "success")
     return {
         "difference": 100 * result.difference,
         "low": 100 * result.low,
