@@ -234,23 +234,16 @@ class Planner:
         same actions for them, at the cost of the episodes still running."""
         goal = np.asarray(obs, dtype=np.float64)[:, :2]
         first = np.zeros(len(goal), dtype=np.int64)
-        rows = None if running is None or running.all() else np.flatnonzero(running)
-        if rows is None:
-            scores = self.scores(goal, pose, obstacles)
-        elif len(rows):
+        rows = np.arange(len(goal)) if running is None else np.flatnonzero(running)
+        if len(rows):
             scores = self.scores(
                 goal[rows],
                 None if pose is None else pose[rows],
                 None if obstacles is None else tuple(a[rows] for a in obstacles),
                 rows,
             )
-        if rows is None or len(rows):
             best = scores.argmax(axis=1)  # the first of equal scores
-            chosen = self.prefixes[best // len(self.params.continuations), 0]
-            if rows is None:
-                first = chosen
-            else:
-                first[rows] = chosen
+            first[rows] = self.prefixes[best // len(self.params.continuations), 0]
         return first if self.commands is None else self.commands[first]
 
     @property
