@@ -90,19 +90,29 @@ def refused(workdir: Path, *args: str | Path) -> str:
 # ------------------------------------------------------------------ 1: damaged model files
 
 
-def test_every_torch_load_of_the_package_is_the_safe_loader() -> None:
+def _torch_callers(function: str) -> list[str]:
+    """The package's files, one entry per call, that call ``torch.<function>`` directly."""
     callers = []
     for path in sorted((ROOT / "socnav_wm").rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if (
                 isinstance(node, ast.Call)
                 and isinstance(node.func, ast.Attribute)
-                and node.func.attr == "load"
+                and node.func.attr == function
                 and isinstance(node.func.value, ast.Name)
                 and node.func.value.id == "torch"
             ):
                 callers.append(path.relative_to(ROOT).as_posix())
-    assert callers == ["socnav_wm/io.py"]  # load_torch_file, weights only
+    return callers
+
+
+def test_every_torch_load_of_the_package_is_the_safe_loader() -> None:
+    assert _torch_callers("load") == ["socnav_wm/io.py"]  # load_torch_file, weights only
+
+
+def test_every_torch_save_of_the_package_is_torch_bytes() -> None:
+    """Saved in memory (io.torch_bytes), so the bytes do not depend on the temporary name."""
+    assert _torch_callers("save") == ["socnav_wm/io.py"]
 
 
 class Unsafe:

@@ -250,21 +250,3 @@ def test_a_saved_model_has_the_same_bytes_whatever_its_temporary_name(tmp_path: 
     assert (tmp_path / "a.pt").read_bytes() == (tmp_path / "b.pt").read_bytes()
     loaded = torch.load(tmp_path / "a.pt", weights_only=True)
     assert torch.equal(loaded["weights"], payload["weights"])
-
-
-def test_every_torch_save_of_the_package_is_torch_bytes() -> None:
-    import ast
-
-    root = Path(__file__).resolve().parents[1] / "socnav_wm"
-    callers = []
-    for path in sorted(root.rglob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if (
-                isinstance(node, ast.Call)
-                and isinstance(node.func, ast.Attribute)
-                and node.func.attr == "save"
-                and isinstance(node.func.value, ast.Name)
-                and node.func.value.id == "torch"
-            ):
-                callers.append(path.name)
-    assert callers == ["io.py"]
