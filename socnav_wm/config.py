@@ -400,6 +400,7 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "scenario_collect": ("seed", "env", "collect"),
     "scenario_planning_model": ("env", "planning_model"),
     "scenario_wm_mpc": ("env", "eval", "planning"),
+    "scenario_predict": ("env", "prediction", "planning"),
     "scenarios_report": (),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted

@@ -249,6 +249,23 @@ def test_predict_measures_a_preset_without_its_own_world_model_or_agent(
     ]
 
 
+def test_predict_under_a_planner_measures_its_policy_too_and_refuses_a_learned_one(
+    workdir: Path, made
+) -> None:
+    out = workdir / "pp" / "prediction.json"
+    common = ["--planning-model", str(made["p3"]), "--no-world-model", "--no-agent-policy",
+              "--set", "prediction.episodes=3", "--set", "prediction.starts=2", "--out",
+              str(out), "--figure", str(workdir / "pp" / "prediction.png"), "--no-tracking"]  # fmt: skip
+    result = runner.invoke(app, ["predict", "--planner-policy", "cv-mpc", *common])
+    assert result.exit_code == 0, result.output
+    written = json.loads(out.read_text())
+    assert sorted(written["policies"]) == ["cv-mpc", "random"]
+    assert written["settings"]["starts"] == 2
+    assert "by what they met" in result.output
+    message = refused(workdir, "predict", "--planner-policy", "wm-mpc", *common)
+    assert message == "--planner-policy: expected one of cv-mpc, oracle-mpc, got 'wm-mpc'"
+
+
 def test_collect_under_a_planner_is_refused_for_a_learned_one_or_a_lone_epsilon(
     workdir: Path,
 ) -> None:
@@ -261,8 +278,8 @@ def test_collect_under_a_planner_is_refused_for_a_learned_one_or_a_lone_epsilon(
         workdir, "collect", "--policy", "cv-mpc", *lattice, "--out", "r", "--metrics", "r.json"
     )
     assert message == (
-        "--policy: the rollouts hold the paper's four actions; planning.actions must be paper, "
-        "not a lattice"
+        "--policy: the rollouts and the models hold the paper's four actions; planning.actions "
+        "must be paper, not a lattice"
     )
 
 

@@ -66,26 +66,28 @@ def collect(
     `collect`) or a planner's."""
     planner = None
     if policy != "random":
-        planner = (policy, _collecting_planner(policy, options))
+        planner = (policy, _model_free_planner(policy, options, "--policy", "random or "))
     elif epsilon:
         raise UserError("--epsilon: only under a planner (--policy)")
     run_stage("collect", options, out=out, metrics=metrics, planner=planner, epsilon=epsilon)
 
 
-def _collecting_planner(name: str, options: SharedOptions) -> Any:
-    """The policies of planner ``name`` for ``collect --policy`` (one line when it is not a
-    planner without model files)."""
+def _model_free_planner(name: str, options: SharedOptions, option: str, other: str = "") -> Any:
+    """The policies of planner ``name`` for ``option`` (``collect --policy``, ``predict
+    --planner-policy``): one line when it is not a planner without model files (``other``: the
+    option's other choices, for the message) or plans with other actions than the paper's four
+    (what rollouts and the models' actions hold)."""
     from socnav_wm.method_names import PLANNER_NAMES
     from socnav_wm.methods import method
 
     chosen = [p for p in PLANNER_NAMES if not method(p).model_files]
     if name not in chosen:
-        raise UserError(f"--policy: expected random or one of {', '.join(chosen)}, got {name!r}")
+        raise UserError(f"{option}: expected {other}one of {', '.join(chosen)}, got {name!r}")
     params = options.load()
     if params.planning.resolved(name).actions != "paper":
         raise UserError(
-            "--policy: the rollouts hold the paper's four actions; planning.actions must be "
-            "paper, not a lattice"
+            f"{option}: the rollouts and the models hold the paper's four actions; "
+            "planning.actions must be paper, not a lattice"
         )
     return method(name).configured(params.env, {"planning": params.planning})
 
@@ -321,6 +323,13 @@ def predict(
             "planning models and the baselines (a preset without a VAE + LSTM of its own)."
         ),
     ] = True,
+    planner_policy: Annotated[
+        str | None,
+        typer.Option(
+            help="Measure under this planner's ε-greedy policy too (cv-mpc, oracle-mpc): the "
+            "situations a planning model meets when it plans."
+        ),
+    ] = None,
 ) -> None:
     """k-step prediction errors in metres of the world model (VAE + LSTM) and the planning world
     model's seeds beside copy-last, static humans and constant velocity (the robot's own motion
@@ -332,6 +341,12 @@ def predict(
 
     if planning_model is None:
         planning_model = [LAYOUT.planning_model(s) for s in params.planning_model.seeds]
+    planner = None
+    if planner_policy is not None:
+        planner = (
+            planner_policy,
+            _model_free_planner(planner_policy, options, "--planner-policy"),
+        )
     result = stage.run(
         params,
         vae=vae if world_model else None,
@@ -341,6 +356,7 @@ def predict(
         out=out,
         figure=figure,
         transfer=transfer,
+        planner=planner,
         **options.stage_options(),
     )
     for title, rows, formats in stage.tables(result, PREDICTION_KS):

@@ -3,7 +3,9 @@ each preset, ``oracle-mpc`` − ``cv-mpc`` paired, and the field's published num
 
 Reads what the ``scenarios`` pipeline (``scenarios/dvc.yaml``) writes: for preset ``P`` and
 method ``M``, ``metrics/scenarios/P/M.json`` (the format of ``metrics/eval/M.json``) and the
-episodes ``data/scenarios/P/M.parquet`` (for the paired comparison, scenario by scenario).
+episodes ``data/scenarios/P/M.parquet`` (for the paired comparison, scenario by scenario); where
+a preset has a planning model of its own, its prediction errors split by what the humans met
+(``metrics/scenarios/P/prediction.json``, ``socnav-wm predict``'s output).
 """
 
 from __future__ import annotations
@@ -47,6 +49,9 @@ TABLE_METRICS: tuple[tuple[str, str], ...] = (
     ("time_to_reach_goal", "time to goal (s)"),
 )
 """(metric, column title) of the per-preset table; rates in %, the time in seconds."""
+
+SPLIT_KS: tuple[int, ...] = (1, 4, 16)
+"""The steps ahead at which the report gives the planning model's error split by interaction."""
 
 GAP_POINTS = 3.0
 """``oracle-mpc`` − ``cv-mpc`` success, in points, that makes a preset one where a world model
@@ -110,6 +115,11 @@ class ScenarioTable:
     learned: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     """preset → learned planner → its paired success difference (points) from ``cv-mpc``
     (``versus_physics``) and from ``oracle-mpc`` (``versus_oracle``)."""
+    split: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """preset → the planning model's humans' error split by interaction under the policy it
+    plans with (``policy``, ``distance``, ``k`` and per interaction ``share``, constant
+    velocity's ``error`` and the model's paired ``difference`` with intervals, at
+    :data:`SPLIT_KS`)."""
 
     def markdown(self) -> str:
         """The per-preset table, the gaps and the published comparisons, as markdown."""
@@ -151,6 +161,8 @@ class ScenarioTable:
                         f"{a['high']:+.1f}] | {_p(a['p_value'])} | {b['difference']:+.1f} "
                         f"[{b['low']:+.1f}, {b['high']:+.1f}] | {_p(b['p_value'])} |"
                     )
+        if self.split:
+            lines += ["", *self.split_rows()]
         published = self.published_rows()
         if published:
             lines += [
@@ -161,6 +173,34 @@ class ScenarioTable:
                 *published,
             ]
         return "\n".join(lines) + "\n"
+
+    def split_rows(self) -> list[str]:
+        """The planning model's error by interaction, as a markdown table."""
+        ks = " | ".join(f"k = {k}" for k in SPLIT_KS)
+        rows = [
+            "Planning model − constant velocity, humans' error by what each human met in the "
+            "window (m, mean over rollouts with their 95% interval; negative: the model is "
+            "nearer the truth), under the policy it plans with (`socnav-wm predict`):",
+            "",
+            f"| preset | policy | met | share at k = {SPLIT_KS[-1]} | constant velocity at "
+            f"k = {SPLIT_KS[-1]} (m) | {ks} |",
+            "|---|---|---|---|---|" + "---|" * len(SPLIT_KS),
+        ]
+        for preset, split in self.split.items():
+            for name, part in split["interactions"].items():
+                cells = [
+                    "–" if not math.isfinite(d) else f"{d:+.3f} [{low:+.3f}, {high:+.3f}]"
+                    for d, (low, high) in zip(
+                        part["difference"], part["difference_ci"], strict=True
+                    )
+                ]
+                rows.append(
+                    f"| `{preset}` | `{split['policy']}` | {name} within "
+                    f"{split['distance']:g} m | {part['share']:.2f} | {part['error']:.3f} | "
+                    + " | ".join(cells)
+                    + " |"
+                )
+        return rows
 
     def published_rows(self) -> list[str]:
         rows = []
@@ -186,6 +226,7 @@ class ScenarioTable:
             "gaps": self.gaps,
             "missing": self.missing,
             "learned": self.learned,
+            "split": self.split,
         }
 
 
@@ -214,8 +255,12 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     summaries: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     gaps: dict[str, dict[str, Any]] = {}
     learned: dict[str, dict[str, dict[str, Any]]] = {}
+    split: dict[str, dict[str, Any]] = {}
     missing: list[str] = []
     for preset in presets:
+        prediction = metrics_dir / preset / "prediction.json"
+        if prediction.is_file():
+            split[preset] = _split(prediction)
         methods: dict[str, dict[str, dict[str, float]]] = {}
         for method in SCENARIO_METHODS + LEARNED_METHODS:
             path = metrics_dir / preset / f"{method}.json"
@@ -255,7 +300,47 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
         raise ValueError(
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
-    return ScenarioTable(summaries, gaps, missing, learned)
+    return ScenarioTable(summaries, gaps, missing, learned, split)
+
+
+def _split(path: Path) -> dict[str, Any]:
+    """The planning model's error by interaction at :data:`SPLIT_KS` from ``socnav-wm
+    predict``'s output, under the planner's policy where it was measured, else the random one
+    (one line naming the file when it has no planning model or no split)."""
+    content = read_json(path)
+    try:
+        settings, policies = content["settings"], content["policies"]
+        policy = settings.get("planner") or "random"
+        errors = policies[policy]
+        interactions, ks = errors["interactions"], errors["k"]
+        versus = interactions["planning_model"]
+    except (KeyError, TypeError) as missing:
+        raise ValueError(
+            f"{path}: not a prediction with a planning model split by interaction "
+            f"(no {missing}; socnav-wm predict --planning-model …)"
+        ) from None
+    absent = [k for k in SPLIT_KS if k not in ks]
+    if absent:
+        raise ValueError(f"{path}: no errors at k = {', '.join(map(str, absent))}")
+    at = [ks.index(k) for k in SPLIT_KS]
+    last = at[-1]
+    cv = interactions["predictors"]["constant-velocity"]
+    parts = {
+        name: {
+            "share": interactions["share"][name][last],
+            "error": cv[name][last],
+            "difference": [versus[name]["difference"][i] for i in at],
+            "difference_ci": [versus[name]["difference_ci"][i] for i in at],
+        }
+        for name in interactions["share"]
+        if interactions["share"][name][last] > 0
+    }
+    return {
+        "policy": policy,
+        "distance": interactions["distance"],
+        "k": list(SPLIT_KS),
+        "interactions": parts,
+    }
 
 
 def _episodes(path: Path, needed_by: str) -> pa.Table:

@@ -46,10 +46,12 @@ STAGE_MODULES: dict[str, str] = {
     # scenarios/dvc.yaml: every non-learning method in every scenario preset, and the table.
     "scenario_robots": "socnav_wm.stages.evaluate",
     "scenario_planners": "socnav_wm.stages.evaluate",
-    # scenarios/dvc.yaml: the planning model learned in a preset, and wm-mpc on it.
+    # scenarios/dvc.yaml: the planning model learned in a preset, wm-mpc on it, and its errors
+    # split by interaction.
     "scenario_collect": "socnav_wm.stages.collect",
     "scenario_planning_model": "socnav_wm.stages.train_planning_model",
     "scenario_wm_mpc": "socnav_wm.stages.evaluate",
+    "scenario_predict": "socnav_wm.stages.predict",
     "scenarios_report": "socnav_wm.stages.scenarios_report",
 }
 """Stage name → the module its command runs."""
@@ -66,6 +68,7 @@ STAGE_METHODS: dict[str, tuple[str, ...]] = {
     "scenario_robots": BASELINE_NAMES,
     "scenario_planners": ("cv-mpc", "oracle-mpc"),
     "scenario_wm_mpc": ("wm-mpc",),
+    "scenario_predict": ("cv-mpc",),
 }
 """Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).
 The registry imports a method's builder only when it builds a policy, out of the imports'

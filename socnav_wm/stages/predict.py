@@ -11,6 +11,7 @@ from typing import Any
 
 from socnav_wm.agents.agent_file import load_agent
 from socnav_wm.config import STAGE_SECTIONS, Params, params_dict, select_sections
+from socnav_wm.data.collect import PlannerFactory
 from socnav_wm.evaluation.figures import prediction_figure
 from socnav_wm.io import check_writable, outputs_together, write_json_atomic
 from socnav_wm.tracking import stage_run
@@ -30,13 +31,15 @@ def run(
     figure: Path,
     tracking: bool = True,
     transfer: bool = False,
+    planner: tuple[str, PlannerFactory] | None = None,
 ) -> dict[str, Any]:
     """Measure with the ``prediction`` section's settings, write ``out`` and ``figure``
     together, log to MLflow; returns the errors. ``planning_models``: one file per training seed
     of the planning world model; ``vae`` and ``lstm`` None: without the paper's world model (a
     preset that has none of its own). Every model is loaded first, and refused in one line when it
     was made for other scenarios than ``params.env`` (in another world, unless ``transfer``:
-    then the errors say how the models transfer)."""
+    then the errors say how the models transfer). ``planner``: a planner's name and policies,
+    to measure under its ε-greedy policy too (what a planning model meets when it plans)."""
     check_writable(out, figure)
     planners = [load_residual(path, params.env, transfer=transfer) for path in planning_models]
     world_model = None
@@ -49,6 +52,7 @@ def run(
     )
     settings = {
         "transfer": transfer,
+        "planner": None if planner is None else planner[0],
         **select_sections(params_dict(params), STAGE_SECTIONS["predict"]),
         "files": {
             "agent": str(agent) if agent else None,
@@ -61,6 +65,7 @@ def run(
             params.prediction,
             world_model=world_model,
             agent=policy,
+            planner=planner,
             planning_models=planners,
         )
         with outputs_together(out, figure) as (out_tmp, figure_tmp):
@@ -114,6 +119,9 @@ def tables(result: Mapping[str, Any], ks: Sequence[int]) -> list[Table]:
                     {c: ".3f" for c in rows[0] if c != "k"} if rows else {},
                 )
             )
+        split = errors.get("interactions")
+        if split:
+            found.append(_interaction_table(policy, errors["k"], split, ks))
         versus = errors.get("planning_model")
         if versus:
             rows = [
@@ -136,3 +144,35 @@ def tables(result: Mapping[str, Any], ks: Sequence[int]) -> list[Table]:
                 )
             )
     return found
+
+
+def _interaction_table(
+    policy: str, all_ks: Sequence[int], split: Mapping[str, Any], ks: Sequence[int]
+) -> Table:
+    """The humans' error by what they met (``split``: a result's ``"interactions"``): the
+    share who met it, constant velocity's and the planning model's error, and their paired
+    difference with its interval where there is a planning model."""
+    versus = split.get("planning_model", {})
+    rows = []
+    for k in ks:
+        if k not in all_ks:
+            continue
+        i = all_ks.index(k)
+        for name, share in split["share"].items():
+            if not share[i]:
+                continue
+            row: dict[str, Any] = {"k": k, "met": name, "share": share[i]}
+            for predictor in ("constant-velocity", "planning-model"):
+                if predictor in split["predictors"]:
+                    row[predictor] = split["predictors"][predictor][name][i]
+            if name in versus:
+                row["difference"] = versus[name]["difference"][i]
+                row["low"], row["high"] = versus[name]["difference_ci"][i]
+            rows.append(row)
+    formats = {"share": ".3f", "constant-velocity": ".3f", "planning-model": ".3f"}
+    formats.update({"difference": "+.4f", "low": "+.4f", "high": "+.4f"})
+    title = (
+        f"{policy} policy: humans' error (m) by what they met within "
+        f"{split['distance']:g} m (a human may meet several)"
+    )
+    return title, rows, formats

@@ -111,7 +111,8 @@ class PlanningModelParams(Section):
 class PredictionParams(Section):
     """The ``predict`` stage (socnav_wm/worldmodel/prediction.py): each world model's k-step
     errors in metres, open loop with the true actions after a warm-up on the real trajectory,
-    under the random policy and a trained agent's ε-greedy one, on fresh scenarios."""
+    under the random policy and a trained agent's or a planner's ε-greedy one, on fresh
+    scenarios, split by what each human met in the window."""
 
     SECTION: ClassVar[str] = "prediction"
 
@@ -124,4 +125,12 @@ class PredictionParams(Section):
     horizon: int = Field(16, gt=0)
     """Steps ahead: k = 1 … horizon."""
     epsilon: float = Field(0.2, ge=0, le=1, allow_inf_nan=False)
-    """Exploration of the agent's policy (a random action with this probability)."""
+    """Exploration of the agent's and a planner's policy (a random action with this
+    probability)."""
+    starts: int = Field(1, gt=0, le=64)
+    """Open-loop rollouts per episode: from step ``warmup``, then every ``horizon`` steps (the
+    later ones see the humans the robot meets mid-episode)."""
+    interaction_distance: float = Field(1.5, gt=0, le=100, allow_inf_nan=False)
+    """The split by interaction (m): a human counts as avoiding another human, meeting the
+    robot (when it sees the robot) or walking around an obstacle in a window when, at some
+    step of it, their centres (the obstacle's outline) are this near."""

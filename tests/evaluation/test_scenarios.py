@@ -137,3 +137,42 @@ def test_a_learned_planner_is_compared_with_physics_and_the_oracle_where_it_was_
     assert versus["versus_physics"]["difference"] == pytest.approx(10.0)
     assert versus["versus_oracle"]["difference"] == pytest.approx(100 * (learned.mean() - 1))
     assert "| `dense` | `wm-mpc` | +10.0 [" in document.read_text()
+
+
+def test_the_planning_models_errors_split_by_interaction_join_the_table(tmp_path: Path) -> None:
+    import torch
+
+    from socnav_wm.env.params import EnvParams
+    from socnav_wm.methods import method
+    from socnav_wm.planning.params import PlanningParams
+    from socnav_wm.worldmodel.params import PredictionParams
+    from socnav_wm.worldmodel.prediction import evaluate_prediction
+    from socnav_wm.worldmodel.residual import ResidualDynamics
+
+    for name in SCENARIO_METHODS:
+        _write(tmp_path, "dense", name, np.ones(20))
+    env = EnvParams(num_humans=4, humans_see_robot=True)
+    torch.manual_seed(0)
+    model = ResidualDynamics(env.num_humans, 8, env.dt, None)
+    torch.nn.init.normal_(model.net[-1].weight, std=0.5)  # not constant velocity
+    planner = ("cv-mpc", method("cv-mpc").configured(env, {"planning": PlanningParams()}))
+    settings = PredictionParams(episodes=6, scenario_seed=3, warmup=2, horizon=16)
+    result = evaluate_prediction(
+        env, settings, world_model=None, agent=None, planner=planner, planning_models=[model]
+    )
+    path = tmp_path / "metrics" / "dense" / "prediction.json"
+    path.write_text(json.dumps(result))
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    _run(tmp_path, ("dense",), document)
+    split = json.loads((tmp_path / "summary.json").read_text())["split"]["dense"]
+    assert split["policy"] == "cv-mpc" and split["k"] == [1, 4, 16]
+    errors = result["policies"]["cv-mpc"]["interactions"]
+    humans = split["interactions"]["humans"]
+    assert humans["difference"][-1] == errors["planning_model"]["humans"]["difference"][-1]
+    assert "| `dense` | `cv-mpc` | humans within 1.5 m |" in document.read_text()
+    # Without a planning model there is nothing to split: refused in one line.
+    del result["policies"]["cv-mpc"]["interactions"]["planning_model"]
+    path.write_text(json.dumps(result))
+    with pytest.raises(ValueError, match="prediction.json: not a prediction with a planning"):
+        _run(tmp_path, ("dense",), document)

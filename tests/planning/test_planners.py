@@ -191,7 +191,7 @@ def tiny_world_model(tmp_path) -> tuple[VAE, LatentLSTM]:
 def test_the_vae_lstm_model_imagines_what_the_predict_stage_measures(tmp_path) -> None:
     vae, lstm = tiny_world_model(tmp_path)
     recording = record(ENV, random_policy(1), 4, np.arange(5), 8)
-    _, expected = model_positions(vae, lstm, recording, warmup=3, horizon=4)
+    _, expected = model_positions(vae, lstm, recording, start=3, horizon=4, batch_size=512)
     model = VaeLstmModel(vae, lstm)
     model.reset(recording.obs[0])
     for t in range(3):
