@@ -10,7 +10,8 @@ random. The simulator's draws are a function of ``(seed, scenario, step)``, so c
 under the episode's own seed would foresee the episode's future draws: a clairvoyant ceiling.
 By default the clones run under a seed of the planner's own (``planning.oracle_seed``), so they
 only know the humans' rules, not their future coin flips; ``planning.oracle_clairvoyant``
-reuses the episode's seed and is labelled as such.
+reuses the episode's seed and is labelled as such. ``planning.oracle_reactions`` false blinds
+the clones' humans to the robot: the ceiling without knowing how people react to it.
 """
 
 from __future__ import annotations
@@ -77,6 +78,8 @@ class OraclePlanner:
         seed = None if p.oracle_clairvoyant else p.oracle_seed
         clone = clone_simulator(sim, s, seed, envs)
         state = clone.state
+        if not p.oracle_reactions:
+            state.human_sees_robot[:] = False
         goal = robot_frame_goal(state)
         distance = np.hypot(*(state.goal_xy - state.robot_xy).T)
         score = np.zeros(clone.num_envs)

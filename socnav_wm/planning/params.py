@@ -87,6 +87,9 @@ class PlanningParams(Section):
     new goals), not the episode's: it knows the humans' rules, not their future coin flips."""
     oracle_clairvoyant: bool = False
     """``oracle-mpc``: the clones reuse the episode's own draws instead (a clairvoyant ceiling)."""
+    oracle_reactions: bool = True
+    """``oracle-mpc``: false, the clones' humans do not react to the robot (whatever
+    ``env.humans_see_robot``): what knowing their reaction is worth to the ceiling."""
     per_method: dict[str, dict[str, Any]] = Field(
         default_factory=lambda: {"vae-lstm-mpc": {"prefix_length": 2, "horizon": 6}}
     )

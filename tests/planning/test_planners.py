@@ -77,6 +77,22 @@ def test_the_oracle_draws_its_own_random_numbers() -> None:
     assert not np.array_equal(sim.state.human_xy, other.state.human_xy)
 
 
+def test_a_blind_oracle_plans_as_if_the_humans_did_not_see_the_robot() -> None:
+    env = ENV.replace(num_humans=6, humans_see_robot=True)
+    sim = Simulator(8, env)
+    sim.reset(seed=3)
+    for _ in range(6):
+        sim.step(np.ones(8, dtype=np.int64))
+    blind_sim = clone_simulator(sim)
+    blind_sim.state.human_sees_robot[:] = False
+    envs = np.arange(8)
+    default = OraclePlanner(PlanningParams(), env)
+    blind = OraclePlanner(PlanningParams(oracle_reactions=False), env)
+    np.testing.assert_array_equal(blind.scores(sim, envs), default.scores(blind_sim, envs))
+    assert not np.array_equal(blind.scores(sim, envs), default.scores(sim, envs))
+    assert sim.state.human_sees_robot.all()  # the episode's humans still see it
+
+
 def one_human_ahead(env: EnvParams) -> Simulator:
     """A room with the robot at (−1.2, 0) facing its goal at (1.2, 0), a human standing at the
     origin on the straight path, and the two others standing in far corners."""
