@@ -93,6 +93,12 @@ class PlanningModelParams(Section):
     velocity's mean error at ``k`` (0: the plain mean, which the last steps' errors, 100× the
     first ones', decide alone; 1: every step relative to constant velocity; 0.5, between them,
     is better than constant velocity far ahead and as good near it: docs/worldmodel.md)."""
+    near_robot_weight: float = Field(0.0, ge=0, le=1000, allow_inf_nan=False)
+    """A human within ``near_robot_distance`` of the robot at a sample's start counts ``1 +
+    near_robot_weight`` times in the loss (0: every human alike): where the planner's
+    collisions are decided."""
+    near_robot_distance: float = Field(1.5, gt=0, le=100, allow_inf_nan=False)
+    """See ``near_robot_weight`` (m, between centres)."""
     neighbours: int | None = Field(None, gt=0)
     """How many other humans each human's correction sees: the K nearest, nearest first (what a
     crowd needs: fixed slots by distance, and a cost that grows with K, not with the crowd), or

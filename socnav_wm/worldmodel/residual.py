@@ -350,10 +350,16 @@ def _start(
     return positions(seq_obs), human_velocities(seq_prev, seq_obs, prev_action, env_params)
 
 
-def _step_errors(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """(B, K) the humans' mean Euclidean position error (m) at each step."""
+def _step_errors(
+    predicted: torch.Tensor, target: torch.Tensor, humans: torch.Tensor | None = None
+) -> torch.Tensor:
+    """(B, K) the humans' mean Euclidean position error (m) at each step; ``humans`` (B, H):
+    each human's weight in the mean (None: alike)."""
     squared = ((predicted[:, :, 1:] - target[:, :, 1:]) ** 2).sum(-1)
-    return torch.sqrt(squared + 1e-12).mean(-1)
+    error = torch.sqrt(squared + 1e-12)
+    if humans is None:
+        return error.mean(-1)
+    return (error * humans[:, None]).sum(-1) / humans.sum(-1, keepdim=True)
 
 
 def _masked_loss(
@@ -361,12 +367,13 @@ def _masked_loss(
     target: torch.Tensor,
     mask: torch.Tensor,
     weights: torch.Tensor | None = None,
+    humans: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Mean Euclidean position error (m) of the humans over the real steps: the metric itself
     (a squared error rewards hedging, slowing every human down towards the mean turn, which
     raises the typical error of the many who walk straight); ``weights`` (K,): each step's
-    weight."""
-    error = _step_errors(predicted, target)
+    weight; ``humans`` (B, H): each human's."""
+    error = _step_errors(predicted, target, humans)
     if weights is not None:
         error = error * weights
     return (error * mask).sum() / mask.sum().clamp(min=1)
@@ -460,9 +467,16 @@ def train_residual(
         weights = per_step.clamp(min=1e-6) ** -relative_weight
         weights = weights / weights.mean()
 
+    near = None
+    if params.near_robot_weight:
+        # In the robot's frame: a human's distance from the robot is its position's length.
+        distance = torch.linalg.vector_norm(train_t[0][:, 1:], dim=-1)  # (N, H)
+        near = 1.0 + params.near_robot_weight * (distance <= params.near_robot_distance)
+
     def batch_loss(rows: torch.Tensor) -> tuple[torch.Tensor, float]:
         p, u, v, w, y, m, pose = (x[rows] for x in train_t)
-        return _masked_loss(model.rollout(p, u, v, w, pose), y, m, weights), 1.0
+        humans = None if near is None else near[rows]
+        return _masked_loss(model.rollout(p, u, v, w, pose), y, m, weights, humans), 1.0
 
     optimizer = torch.optim.Adam(model.parameters(), lr=params.learning_rate)
     updates = params.max_epochs * -(-len(train) // params.batch_size)

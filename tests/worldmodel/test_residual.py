@@ -156,6 +156,27 @@ def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> 
     assert error < copy_error
 
 
+def test_weighting_the_humans_near_the_robot_changes_the_training(recording) -> None:
+    obs, actions, ids, next_obs = rows_of(recording)
+    train, val = ids < 36, ids >= 36
+    seqs = [
+        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon=4, stride=2)
+        for m in (train, val)
+    ]
+    near = np.linalg.norm(positions(seqs[0].obs)[:, 1:], axis=-1) <= 1.5
+    assert 0 < near.mean() < 1  # some humans start near the robot, not all
+
+    def trained(**weight) -> list[float]:  # the training loss of each epoch
+        params = PlanningModelParams(hidden_dim=8, learning_rate=1e-3, batch_size=32,
+                                     max_epochs=2, patience=2, room=False, **weight)  # fmt: skip
+        result = residual.train_residual(*seqs, ENV, params, seed=0)
+        return [row["train_loss"] for row in result.history[1:]]
+
+    plain = trained()
+    assert plain == trained(near_robot_weight=0.0, near_robot_distance=0.1)
+    assert plain != trained(near_robot_weight=10.0)
+
+
 def test_a_planner_on_the_untrained_model_scores_as_cv_mpc(recording) -> None:
     planning = PlanningParams(horizon=4, prefix_length=2)
     ours = ResidualPlanningModel(residual.ResidualDynamics(3, 8, ENV.dt), ENV)
