@@ -401,6 +401,9 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "scenario_planning_model": ("env", "planning_model"),
     "scenario_wm_mpc": ("env", "eval", "planning"),
     "scenario_predict": ("env", "prediction", "planning"),
+    "scenario_vae": ("seed", "vae"),
+    "scenario_lstm": ("seed", "lstm"),
+    "scenario_dqn": ("env", "eval", "agent", "studies.presets"),
     "scenarios_report": (),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted

@@ -52,6 +52,10 @@ STAGE_MODULES: dict[str, str] = {
     "scenario_planning_model": "socnav_wm.stages.train_planning_model",
     "scenario_wm_mpc": "socnav_wm.stages.evaluate",
     "scenario_predict": "socnav_wm.stages.predict",
+    # scenarios/dvc.yaml: the paper's world model and its five agents learned in a preset.
+    "scenario_vae": "socnav_wm.stages.train_vae",
+    "scenario_lstm": "socnav_wm.stages.train_lstm",
+    "scenario_dqn": "socnav_wm.studies.runner",
     "scenarios_report": "socnav_wm.stages.scenarios_report",
 }
 """Stage name → the module its command runs."""
@@ -69,6 +73,7 @@ STAGE_METHODS: dict[str, tuple[str, ...]] = {
     "scenario_planners": ("cv-mpc", "oracle-mpc"),
     "scenario_wm_mpc": ("wm-mpc",),
     "scenario_predict": ("cv-mpc",),
+    "scenario_dqn": VARIANT_NAMES,
 }
 """Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).
 The registry imports a method's builder only when it builds a policy, out of the imports'

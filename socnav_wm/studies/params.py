@@ -70,4 +70,6 @@ def default_studies() -> dict[str, StudyParams]:
         "sort_humans": StudyParams(
             variants=["dueling-dqn"], seeds=[0, 1, 2], grid={"agent.sort_humans": [True, False]}
         ),
+        # scenarios/dvc.yaml's scenario_dqn: the paper's question in a scenario preset.
+        "presets": StudyParams(variants=list(VARIANT_NAMES), seeds=[0, 1, 2]),
     }
