@@ -253,9 +253,10 @@ def test_predict_under_a_planner_measures_its_policy_too_and_refuses_a_learned_o
     workdir: Path, made
 ) -> None:
     out = workdir / "pp" / "prediction.json"
+    figure = str(workdir / "pp" / "prediction.png")
     common = ["--planning-model", str(made["p3"]), "--no-world-model", "--no-agent-policy",
               "--set", "prediction.episodes=3", "--set", "prediction.starts=2", "--out",
-              str(out), "--figure", str(workdir / "pp" / "prediction.png"), "--no-tracking"]  # fmt: skip
+              str(out), "--figure", figure, "--no-tracking"]  # fmt: skip
     result = runner.invoke(app, ["predict", "--planner-policy", "cv-mpc", *common])
     assert result.exit_code == 0, result.output
     written = json.loads(out.read_text())
