@@ -24,7 +24,7 @@ from socnav_wm.io import read_json
 
 __all__ = [
     "PUBLISHED",
-    "LEARNED_METHODS",
+    "OTHER_PLANNERS",
     "SCENARIO_METHODS",
     "TABLE_METRICS",
     "Published",
@@ -35,10 +35,15 @@ __all__ = [
 SCENARIO_METHODS: tuple[str, ...] = ("orca", "sfm", "cv-mpc", "oracle-mpc")
 """The non-learning methods evaluated in every preset, in the table's order."""
 
-LEARNED_METHODS: tuple[str, ...] = ("wm-mpc",)
-"""The planners on a model learned in the preset (scenarios/dvc.yaml's presets with one), after
-the others in the table, and compared with ``cv-mpc`` and ``oracle-mpc``, where they were
-evaluated."""
+OTHER_PLANNERS: dict[str, str] = {
+    "wm-mpc": "wm-mpc",
+    "oracle-mpc (blind)": "blind/oracle-mpc",
+}
+"""Planners evaluated in some presets only, after the others in the table and compared with
+``cv-mpc`` and ``oracle-mpc`` where they were: name → their files' path under the preset's
+folders without the suffix. ``wm-mpc`` plans on a model learned in the preset; ``oracle-mpc
+(blind)`` is ``oracle-mpc`` whose clones' humans do not react to the robot
+(``planning.oracle_reactions`` false): what knowing that reaction is worth."""
 
 TABLE_METRICS: tuple[tuple[str, str], ...] = (
     ("success", "success"),
@@ -113,7 +118,7 @@ class ScenarioTable:
     missing: list[str]
     """``preset/method`` pairs without a metrics file."""
     learned: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
-    """preset → learned planner → its paired success difference (points) from ``cv-mpc``
+    """preset → planner of :data:`OTHER_PLANNERS` → its paired success difference (points) from ``cv-mpc``
     (``versus_physics``) and from ``oracle-mpc`` (``versus_oracle``)."""
     split: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the planning model's humans' error split by interaction under the policy it
@@ -262,10 +267,10 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
         if prediction.is_file():
             split[preset] = _split(prediction)
         methods: dict[str, dict[str, dict[str, float]]] = {}
-        for method in SCENARIO_METHODS + LEARNED_METHODS:
-            path = metrics_dir / preset / f"{method}.json"
+        for method in SCENARIO_METHODS + tuple(OTHER_PLANNERS):
+            path = metrics_dir / preset / f"{OTHER_PLANNERS.get(method, method)}.json"
             if not path.is_file():
-                if method in SCENARIO_METHODS:  # a learned planner is where it was trained
+                if method in SCENARIO_METHODS:  # the others are where they were evaluated
                     missing.append(f"{preset}/{method}")
                 continue
             content = read_json(path)
@@ -285,11 +290,11 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             gaps[preset]["room"] = (
                 gaps[preset]["difference"] >= GAP_POINTS and gaps[preset]["low"] > 0
             )
-            for name in LEARNED_METHODS:
+            for name, stem in OTHER_PLANNERS.items():
                 if name not in methods:
                     continue
                 episodes = _episodes(
-                    episodes_dir / preset / f"{name}.parquet",
+                    episodes_dir / preset / f"{stem}.parquet",
                     f"{name} − cv-mpc difference of {preset}",
                 )
                 learned.setdefault(preset, {})[name] = {

@@ -176,3 +176,23 @@ def test_the_planning_models_errors_split_by_interaction_join_the_table(tmp_path
     path.write_text(json.dumps(result))
     with pytest.raises(ValueError, match="prediction.json: not a prediction with a planning"):
         _run(tmp_path, ("dense",), document)
+
+
+def test_the_blind_oracle_is_paired_with_physics_and_the_oracle_where_it_ran(
+    tmp_path: Path,
+) -> None:
+    physics = np.r_[np.zeros(20), np.ones(80)]
+    oracle = np.ones(100)
+    blind = np.r_[np.zeros(5), np.ones(95)]  # knows all but the reaction: 15 of 20 saved
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, oracle if method == "oracle-mpc" else physics)
+    for folder in ("metrics", "data"):
+        (tmp_path / folder / "dense" / "blind").mkdir(parents=True)
+    _write(tmp_path, "dense", "blind/oracle-mpc", blind)
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    _run(tmp_path, ("dense",), document)
+    versus = json.loads((tmp_path / "summary.json").read_text())["learned"]["dense"]
+    assert versus["oracle-mpc (blind)"]["versus_physics"]["difference"] == pytest.approx(15.0)
+    assert versus["oracle-mpc (blind)"]["versus_oracle"]["difference"] == pytest.approx(-5.0)
+    assert "| `dense` | `oracle-mpc (blind)` | 95.0 [" in document.read_text()
