@@ -118,8 +118,8 @@ class ScenarioTable:
     missing: list[str]
     """``preset/method`` pairs without a metrics file."""
     learned: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
-    """preset → planner of :data:`OTHER_PLANNERS` → its paired success difference (points) from ``cv-mpc``
-    (``versus_physics``) and from ``oracle-mpc`` (``versus_oracle``)."""
+    """preset → planner of :data:`OTHER_PLANNERS` → its paired success difference (points)
+    from ``cv-mpc`` (``versus_physics``) and from ``oracle-mpc`` (``versus_oracle``)."""
     split: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the planning model's humans' error split by interaction under the policy it
     plans with (``policy``, ``distance``, ``k`` and per interaction ``share``, constant
