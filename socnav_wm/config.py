@@ -402,6 +402,7 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "scenario_wm_mpc": ("env", "eval", "planning"),
     "scenario_predict": ("env", "prediction", "planning"),
     "scenario_blind_oracle": ("env", "eval", "planning"),
+    "scenario_transfer": ("env", "eval", "planning"),
     "scenario_vae": ("seed", "vae"),
     "scenario_lstm": ("seed", "lstm"),
     "scenario_dqn": ("env", "eval", "agent", "studies.presets"),

@@ -55,6 +55,10 @@ TABLE_METRICS: tuple[tuple[str, str], ...] = (
 )
 """(metric, column title) of the per-preset table; rates in %, the time in seconds."""
 
+TRANSFER_DIR = "transfer"
+"""Under a tested-in preset's folders, ``transfer/<trained-in preset>/wm-mpc.*``: ``wm-mpc`` on
+the model of another preset (``evaluate --transfer``)."""
+
 SPLIT_KS: tuple[int, ...] = (1, 4, 16)
 """The steps ahead at which the report gives the planning model's error split by interaction."""
 
@@ -120,6 +124,11 @@ class ScenarioTable:
     learned: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     """preset → planner of :data:`OTHER_PLANNERS` → its paired success difference (points)
     from ``cv-mpc`` (``versus_physics``) and from ``oracle-mpc`` (``versus_oracle``)."""
+    transfer: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    """tested-in preset → trained-in preset → ``wm-mpc`` on the model of the other preset
+    (``--transfer``): its ``success`` summary and its paired success difference (points) from
+    ``cv-mpc`` (``versus_physics``) and from ``wm-mpc`` on the preset's own model
+    (``versus_native``, where that was evaluated)."""
     split: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the planning model's humans' error split by interaction under the policy it
     plans with (``policy``, ``distance``, ``k`` and per interaction ``share``, constant
@@ -166,6 +175,8 @@ class ScenarioTable:
                         f"{a['high']:+.1f}] | {_p(a['p_value'])} | {b['difference']:+.1f} "
                         f"[{b['low']:+.1f}, {b['high']:+.1f}] | {_p(b['p_value'])} |"
                     )
+        if self.transfer:
+            lines += ["", *self.transfer_rows()]
         if self.split:
             lines += ["", *self.split_rows()]
         published = self.published_rows()
@@ -178,6 +189,27 @@ class ScenarioTable:
                 *published,
             ]
         return "\n".join(lines) + "\n"
+
+    def transfer_rows(self) -> list[str]:
+        """``wm-mpc`` on a model of another preset, as a markdown table."""
+        rows = [
+            "| tested in | model trained in | `wm-mpc` success | − `cv-mpc` (points, paired) | "
+            "− `wm-mpc` on the preset's own model (points, paired) |",
+            "|---|---|---|---|---|",
+        ]
+        for tested, sources in self.transfer.items():
+            for trained, result in sources.items():
+                cells = [_cell("success", result["success"])]
+                for key in ("versus_physics", "versus_native"):
+                    d = result.get(key)
+                    cells.append(
+                        "–"
+                        if d is None
+                        else f"{d['difference']:+.1f} [{d['low']:+.1f}, "
+                        f"{d['high']:+.1f}] (p {_p(d['p_value'])})"
+                    )
+                rows.append(f"| `{tested}` | `{trained}` | " + " | ".join(cells) + " |")
+        return rows
 
     def split_rows(self) -> list[str]:
         """The planning model's error by interaction, as a markdown table."""
@@ -231,6 +263,7 @@ class ScenarioTable:
             "gaps": self.gaps,
             "missing": self.missing,
             "learned": self.learned,
+            "transfer": self.transfer,
             "split": self.split,
         }
 
@@ -260,6 +293,7 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     summaries: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     gaps: dict[str, dict[str, Any]] = {}
     learned: dict[str, dict[str, dict[str, Any]]] = {}
+    transfer: dict[str, dict[str, dict[str, Any]]] = {}
     split: dict[str, dict[str, Any]] = {}
     missing: list[str] = []
     for preset in presets:
@@ -301,11 +335,32 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                     "versus_physics": _paired(episodes, physics),
                     "versus_oracle": _paired(episodes, oracle),
                 }
+            native = methods.get("wm-mpc")
+            for folder in sorted((metrics_dir / preset / TRANSFER_DIR).glob("*/wm-mpc.json")):
+                trained = folder.parent.name
+                content = read_json(folder)
+                if not isinstance(content, dict) or "success" not in content.get("metrics", {}):
+                    raise ValueError(f"{folder}: not an evaluation's metrics file")
+                relative = f"{TRANSFER_DIR}/{trained}/wm-mpc.parquet"
+                episodes = _episodes(
+                    episodes_dir / preset / relative, f"transfer of {trained}'s model to {preset}"
+                )
+                own = None
+                if native is not None:
+                    own = _paired(
+                        episodes,
+                        _episodes(episodes_dir / preset / "wm-mpc.parquet", "the transfer"),
+                    )
+                transfer.setdefault(preset, {})[trained] = {
+                    "success": content["metrics"]["success"],
+                    "versus_physics": _paired(episodes, physics),
+                    "versus_native": own,
+                }
     if not summaries:
         raise ValueError(
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
-    return ScenarioTable(summaries, gaps, missing, learned, split)
+    return ScenarioTable(summaries, gaps, missing, learned, transfer, split)
 
 
 def _split(path: Path) -> dict[str, Any]:

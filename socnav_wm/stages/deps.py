@@ -53,6 +53,7 @@ STAGE_MODULES: dict[str, str] = {
     "scenario_wm_mpc": "socnav_wm.stages.evaluate",
     "scenario_predict": "socnav_wm.stages.predict",
     "scenario_blind_oracle": "socnav_wm.stages.evaluate",
+    "scenario_transfer": "socnav_wm.stages.evaluate",
     # scenarios/dvc.yaml: the paper's world model and its five agents learned in a preset.
     "scenario_vae": "socnav_wm.stages.train_vae",
     "scenario_lstm": "socnav_wm.stages.train_lstm",
@@ -75,6 +76,7 @@ STAGE_METHODS: dict[str, tuple[str, ...]] = {
     "scenario_wm_mpc": ("wm-mpc",),
     "scenario_predict": ("cv-mpc",),
     "scenario_blind_oracle": ("oracle-mpc",),
+    "scenario_transfer": ("wm-mpc",),
     "scenario_dqn": VARIANT_NAMES,
 }
 """Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).

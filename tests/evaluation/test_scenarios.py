@@ -196,3 +196,28 @@ def test_the_blind_oracle_is_paired_with_physics_and_the_oracle_where_it_ran(
     assert versus["oracle-mpc (blind)"]["versus_physics"]["difference"] == pytest.approx(15.0)
     assert versus["oracle-mpc (blind)"]["versus_oracle"]["difference"] == pytest.approx(-5.0)
     assert "| `dense` | `oracle-mpc (blind)` | 95.0 [" in document.read_text()
+
+
+def test_a_model_of_another_preset_is_paired_with_physics_and_the_native_model(
+    tmp_path: Path,
+) -> None:
+    physics = np.r_[np.zeros(20), np.ones(80)]
+    native = np.r_[np.zeros(10), np.ones(90)]
+    foreign = np.r_[np.zeros(30), np.ones(70)]
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, np.ones(100) if method == "oracle-mpc" else physics)
+    _write(tmp_path, "dense", "wm-mpc", native)
+    for folder in ("metrics", "data"):
+        (tmp_path / folder / "dense" / "transfer" / "easy").mkdir(parents=True)
+    _write(tmp_path, "dense", "transfer/easy/wm-mpc", foreign)
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    _run(tmp_path, ("dense",), document)
+    result = json.loads((tmp_path / "summary.json").read_text())["transfer"]["dense"]["easy"]
+    assert result["versus_physics"]["difference"] == pytest.approx(-10.0)
+    assert result["versus_native"]["difference"] == pytest.approx(-20.0)
+    assert "| `dense` | `easy` | 70.0 [" in document.read_text()
+    # Its episodes gone (a fresh clone's): refused in one line, not a row without pairs.
+    (tmp_path / "data" / "dense" / "transfer" / "easy" / "wm-mpc.parquet").unlink()
+    with pytest.raises(ValueError, match="transfer of easy's model to dense"):
+        _run(tmp_path, ("dense",), document)
