@@ -55,6 +55,9 @@ TABLE_METRICS: tuple[tuple[str, str], ...] = (
 )
 """(metric, column title) of the per-preset table; rates in %, the time in seconds."""
 
+DQN_METRICS: tuple[str, ...] = ("success", "human_collision", "max_steps")
+"""The test metrics of the preset's agents that the report shows (rates)."""
+
 TRANSFER_DIR = "transfer"
 """Under a tested-in preset's folders, ``transfer/<trained-in preset>/wm-mpc.*``: ``wm-mpc`` on
 the model of another preset (``evaluate --transfer``)."""
@@ -129,6 +132,10 @@ class ScenarioTable:
     (``--transfer``): its ``success`` summary and its paired success difference (points) from
     ``cv-mpc`` (``versus_physics``) and from ``wm-mpc`` on the preset's own model
     (``versus_native``, where that was evaluated)."""
+    dqn: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    """preset → agent variant → its seeds' test metrics (``seeds``, and per metric of
+    :data:`DQN_METRICS` the mean and 95% t-interval over seeds) from the preset's study
+    (``{preset}/dqn/results.parquet``, ``socnav-wm sweep``'s output)."""
     split: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the planning model's humans' error split by interaction under the policy it
     plans with (``policy``, ``distance``, ``k`` and per interaction ``share``, constant
@@ -175,6 +182,8 @@ class ScenarioTable:
                         f"{a['high']:+.1f}] | {_p(a['p_value'])} | {b['difference']:+.1f} "
                         f"[{b['low']:+.1f}, {b['high']:+.1f}] | {_p(b['p_value'])} |"
                     )
+        if self.dqn:
+            lines += ["", *self.dqn_rows()]
         if self.transfer:
             lines += ["", *self.transfer_rows()]
         if self.split:
@@ -189,6 +198,24 @@ class ScenarioTable:
                 *published,
             ]
         return "\n".join(lines) + "\n"
+
+    def dqn_rows(self) -> list[str]:
+        """The paper's five agents trained in a preset, as a markdown table."""
+        rows = [
+            "The paper's question in a preset: its five Dueling DQN variants (the VAE + LSTM "
+            "retrained on the preset's rollouts), trained and tested in the preset; rates in % "
+            "with their 95% intervals over the training seeds:",
+            "",
+            "| preset | variant | seeds | success | human coll. | timeout |",
+            "|---|---|---|---|---|---|",
+        ]
+        for preset, variants in self.dqn.items():
+            for variant, result in variants.items():
+                cells = [_cell(metric, result[metric]) for metric in DQN_METRICS]
+                rows.append(
+                    f"| `{preset}` | `{variant}` | {result['seeds']} | " + " | ".join(cells) + " |"
+                )
+        return rows
 
     def transfer_rows(self) -> list[str]:
         """``wm-mpc`` on a model of another preset, as a markdown table."""
@@ -264,6 +291,7 @@ class ScenarioTable:
             "missing": self.missing,
             "learned": self.learned,
             "transfer": self.transfer,
+            "dqn": self.dqn,
             "split": self.split,
         }
 
@@ -271,6 +299,9 @@ class ScenarioTable:
 def _cell(metric: str, summary: Mapping[str, float] | None) -> str:
     if summary is None or not math.isfinite(summary.get("mean", math.nan)):
         return "–"
+    if not (math.isfinite(summary["low"]) and math.isfinite(summary["high"])):  # one sample
+        scale = 1 if metric == "time_to_reach_goal" else 100
+        return f"{scale * summary['mean']:.1f}"
     if metric == "time_to_reach_goal":
         return f"{summary['mean']:.1f} [{summary['low']:.1f}, {summary['high']:.1f}]"
     return f"{100 * summary['mean']:.1f} [{100 * summary['low']:.1f}, {100 * summary['high']:.1f}]"
@@ -294,12 +325,16 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     gaps: dict[str, dict[str, Any]] = {}
     learned: dict[str, dict[str, dict[str, Any]]] = {}
     transfer: dict[str, dict[str, dict[str, Any]]] = {}
+    dqn: dict[str, dict[str, dict[str, Any]]] = {}
     split: dict[str, dict[str, Any]] = {}
     missing: list[str] = []
     for preset in presets:
         prediction = metrics_dir / preset / "prediction.json"
         if prediction.is_file():
             split[preset] = _split(prediction)
+        study = metrics_dir / preset / "dqn" / "results.parquet"
+        if study.is_file():
+            dqn[preset] = _agents(study)
         methods: dict[str, dict[str, dict[str, float]]] = {}
         for method in SCENARIO_METHODS + tuple(OTHER_PLANNERS):
             path = metrics_dir / preset / f"{OTHER_PLANNERS.get(method, method)}.json"
@@ -360,7 +395,29 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
         raise ValueError(
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
-    return ScenarioTable(summaries, gaps, missing, learned, transfer, split)
+    return ScenarioTable(summaries, gaps, missing, learned, transfer, dqn, split)
+
+
+def _agents(path: Path) -> dict[str, dict[str, Any]]:
+    """Per agent variant of a preset's study, its finished runs' test metrics over seeds."""
+    from socnav_wm.evaluation.intervals import mean_ci
+
+    table = pq.read_table(path).to_pylist()
+    absent = [m for m in ("variant", "status", *DQN_METRICS) if table and m not in table[0]]
+    if absent:
+        raise ValueError(f"{path}: lacks the column(s) {', '.join(absent)}")
+    found: dict[str, dict[str, Any]] = {}
+    for variant in dict.fromkeys(row["variant"] for row in table):
+        runs = [r for r in table if r["variant"] == variant and r["status"] == "done"]
+        if not runs:
+            continue
+        result: dict[str, Any] = {"seeds": len(runs)}
+        for metric in DQN_METRICS:
+            values = [float(r[metric]) for r in runs]
+            mean, low, high, _, _ = mean_ci(values, confidence=0.95, method="t")
+            result[metric] = {"mean": mean, "low": max(low, 0.0), "high": min(high, 1.0)}
+        found[variant] = result
+    return found
 
 
 def _split(path: Path) -> dict[str, Any]:

@@ -221,3 +221,27 @@ def test_a_model_of_another_preset_is_paired_with_physics_and_the_native_model(
     (tmp_path / "data" / "dense" / "transfer" / "easy" / "wm-mpc.parquet").unlink()
     with pytest.raises(ValueError, match="transfer of easy's model to dense"):
         _run(tmp_path, ("dense",), document)
+
+
+def test_the_presets_agents_join_the_report_with_intervals_over_seeds(tmp_path: Path) -> None:
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, np.ones(20))
+    rows = [
+        {"variant": v, "seed": s, "status": "done" if (v, s) != ("maspm", 2) else "failed",
+         "success": p, "human_collision": 1 - p, "max_steps": 0.0}
+        for v, ps in (("dueling-dqn", (0.8, 0.82, 0.84)), ("maspm", (0.7, 0.72, 0.0)))
+        for s, p in enumerate(ps)
+    ]  # fmt: skip
+    study = tmp_path / "metrics" / "dense" / "dqn"
+    study.mkdir(parents=True)
+    pq.write_table(pa.Table.from_pylist(rows), study / "results.parquet")
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    _run(tmp_path, ("dense",), document)
+    agents = json.loads((tmp_path / "summary.json").read_text())["dqn"]["dense"]
+    assert agents["dueling-dqn"]["seeds"] == 3 and agents["maspm"]["seeds"] == 2  # done only
+    assert agents["dueling-dqn"]["success"]["mean"] == pytest.approx(0.82)
+    assert "| `dense` | `dueling-dqn` | 3 | 82.0 [" in document.read_text()
+    pq.write_table(pa.Table.from_pylist([{"variant": "maspm"}]), study / "results.parquet")
+    with pytest.raises(ValueError, match="results.parquet: lacks the column"):
+        _run(tmp_path, ("dense",), document)
