@@ -253,7 +253,11 @@ class ScenarioTable:
         for preset, split in self.split.items():
             for name, part in split["interactions"].items():
                 cells = [
-                    "–" if not math.isfinite(d) else f"{d:+.3f} [{low:+.3f}, {high:+.3f}]"
+                    "–"
+                    if not math.isfinite(d)
+                    else f"{d:+.3f}"
+                    if not (math.isfinite(low) and math.isfinite(high))
+                    else f"{d:+.3f} [{low:+.3f}, {high:+.3f}]"
                     for d, (low, high) in zip(
                         part["difference"], part["difference_ci"], strict=True
                     )
@@ -442,12 +446,18 @@ def _split(path: Path) -> dict[str, Any]:
     at = [ks.index(k) for k in SPLIT_KS]
     last = at[-1]
     cv = interactions["predictors"]["constant-velocity"]
+
+    def number(value: float | None) -> float:  # the file writes NaN as null
+        return math.nan if value is None else float(value)
+
     parts = {
         name: {
             "share": interactions["share"][name][last],
-            "error": cv[name][last],
-            "difference": [versus[name]["difference"][i] for i in at],
-            "difference_ci": [versus[name]["difference_ci"][i] for i in at],
+            "error": number(cv[name][last]),
+            "difference": [number(versus[name]["difference"][i]) for i in at],
+            "difference_ci": [
+                [number(bound) for bound in versus[name]["difference_ci"][i]] for i in at
+            ],
         }
         for name in interactions["share"]
         if interactions["share"][name][last] > 0

@@ -171,6 +171,14 @@ def test_the_planning_models_errors_split_by_interaction_join_the_table(tmp_path
     humans = split["interactions"]["humans"]
     assert humans["difference"][-1] == errors["planning_model"]["humans"]["difference"][-1]
     assert "| `dense` | `cv-mpc` | humans within 1.5 m |" in document.read_text()
+    # A part without rollouts at k = 1 (NaN, written as null) shows a dash.
+    versus = result["policies"]["cv-mpc"]["interactions"]["planning_model"]
+    versus["humans"]["difference"][0] = None
+    versus["humans"]["difference_ci"][0] = [None, None]
+    path.write_text(json.dumps(result))
+    _run(tmp_path, ("dense",), document)
+    row = next(r for r in document.read_text().splitlines() if "humans within" in r)
+    assert row.split(" | ")[5] == "–"
     # Without a planning model there is nothing to split: refused in one line.
     del result["policies"]["cv-mpc"]["interactions"]["planning_model"]
     path.write_text(json.dumps(result))
