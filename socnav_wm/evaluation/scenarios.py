@@ -243,7 +243,7 @@ class ScenarioTable:
         ks = " | ".join(f"k = {k}" for k in SPLIT_KS)
         rows = [
             "Planning model − constant velocity, humans' error by what each human met in the "
-            "window (m, mean over rollouts with their 95% interval; negative: the model is "
+            "window (cm, mean over rollouts with their 95% interval; negative: the model is "
             "nearer the truth), under the policy it plans with (`socnav-wm predict`):",
             "",
             f"| preset | policy | met | share at k = {SPLIT_KS[-1]} | constant velocity at "
@@ -255,18 +255,19 @@ class ScenarioTable:
                 cells = [
                     "–"
                     if not math.isfinite(d)
-                    else f"{d:+.3f}"
+                    else f"{100 * d:+.2f}"
                     if not (math.isfinite(low) and math.isfinite(high))
-                    else f"{d:+.3f} [{low:+.3f}, {high:+.3f}]"
+                    else f"{100 * d:+.2f} [{100 * low:+.2f}, {100 * high:+.2f}]"
                     for d, (low, high) in zip(
                         part["difference"], part["difference_ci"], strict=True
                     )
                 ]
+                met = name
+                if name in split["near"]:
+                    met = f"{name} within {split['distance']:g} m"
                 rows.append(
-                    f"| `{preset}` | `{split['policy']}` | {name} within "
-                    f"{split['distance']:g} m | {part['share']:.2f} | {part['error']:.3f} | "
-                    + " | ".join(cells)
-                    + " |"
+                    f"| `{preset}` | `{split['policy']}` | {met} | {part['share']:.2f} | "
+                    f"{part['error']:.3f} | " + " | ".join(cells) + " |"
                 )
         return rows
 
@@ -434,7 +435,7 @@ def _split(path: Path) -> dict[str, Any]:
         policy = settings.get("planner") or "random"
         errors = policies[policy]
         interactions, ks = errors["interactions"], errors["k"]
-        versus = interactions["planning_model"]
+        versus, near = interactions["planning_model"], interactions["near"]
     except (KeyError, TypeError) as missing:
         raise ValueError(
             f"{path}: not a prediction with a planning model split by interaction "
@@ -465,6 +466,7 @@ def _split(path: Path) -> dict[str, Any]:
     return {
         "policy": policy,
         "distance": interactions["distance"],
+        "near": near,
         "k": list(SPLIT_KS),
         "interactions": parts,
     }

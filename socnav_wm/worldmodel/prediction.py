@@ -272,7 +272,8 @@ def _by_interaction(
     and 95% t-interval over the rollouts that have one (a human's neighbours in one rollout
     are not independent samples)."""
     horizon = valid.shape[1]
-    out: dict[str, Any] = {"distance": distance, "share": {}, "predictors": {}}
+    out: dict[str, Any] = {"distance": distance, "near": list(NEAR), "share": {}}
+    out["predictors"] = {}
     for name, label in met.items():
         out["share"][name] = [float(label[valid[:, k], k].mean()) for k in range(horizon)]
     for predictor, errors in errors_of.items():
@@ -349,6 +350,8 @@ INTERACTIONS = ("robot", "humans", "group", "obstacle", "goal change", "none")
 """What a human met in a window (a human may meet several; ``none``: none of the others):
 the robot it sees, another human, its group (it belongs to one), an obstacle (each within
 ``prediction.interaction_distance`` at some step), and a new goal drawn."""
+NEAR = ("robot", "humans", "obstacle")
+"""The interactions that are a meeting within ``prediction.interaction_distance``."""
 
 
 @dataclass(frozen=True)

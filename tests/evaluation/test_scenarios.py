@@ -171,6 +171,7 @@ def test_the_planning_models_errors_split_by_interaction_join_the_table(tmp_path
     humans = split["interactions"]["humans"]
     assert humans["difference"][-1] == errors["planning_model"]["humans"]["difference"][-1]
     assert "| `dense` | `cv-mpc` | humans within 1.5 m |" in document.read_text()
+    assert "| `dense` | `cv-mpc` | goal change |" in document.read_text()  # not a distance
     # A part without rollouts at k = 1 (NaN, written as null) shows a dash.
     versus = result["policies"]["cv-mpc"]["interactions"]["planning_model"]
     versus["humans"]["difference"][0] = None
