@@ -382,14 +382,12 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                 if not isinstance(content, dict) or "success" not in content.get("metrics", {}):
                     raise ValueError(f"{folder}: not an evaluation's metrics file")
                 relative = f"{TRANSFER_DIR}/{trained}/wm-mpc.parquet"
-                episodes = _episodes(
-                    episodes_dir / preset / relative, f"transfer of {trained}'s model to {preset}"
-                )
+                needed_by = f"transfer of {trained}'s model to {preset}"
+                episodes = _episodes(episodes_dir / preset / relative, needed_by)
                 own = None
                 if native is not None:
                     own = _paired(
-                        episodes,
-                        _episodes(episodes_dir / preset / "wm-mpc.parquet", "the transfer"),
+                        episodes, _episodes(episodes_dir / preset / "wm-mpc.parquet", needed_by)
                     )
                 transfer.setdefault(preset, {})[trained] = {
                     "success": content["metrics"]["success"],
@@ -461,7 +459,7 @@ def _split(path: Path) -> dict[str, Any]:
             ],
         }
         for name in interactions["share"]
-        if interactions["share"][name][last] > 0
+        if (interactions["share"][name][last] or 0.0) > 0  # null: no rollout reached k
     }
     return {
         "policy": policy,
