@@ -131,13 +131,17 @@ def test_sequences_follow_the_episodes_and_mask_their_ends(recording) -> None:
             break
 
 
-def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> None:
-    obs, actions, ids, next_obs = rows_of(recording)
-    train, val = ids < 36, ids >= 36
-    seqs = [
-        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon=6, stride=2)
-        for m in (train, val)
+def train_and_validation(rec, horizon: int) -> list[residual.Sequences]:
+    """Training samples from the recording's first 36 episodes, validation from the rest."""
+    obs, actions, ids, next_obs = rows_of(rec)
+    return [
+        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon, stride=2)
+        for m in (ids < 36, ids >= 36)
     ]
+
+
+def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> None:
+    seqs = train_and_validation(recording, horizon=6)
     result = residual.train_residual(
         *seqs, ENV, PlanningModelParams(hidden_dim=16, learning_rate=1e-3, batch_size=32,
         max_epochs=3, patience=2, relative_weight=0.0, room=False), seed=0,
@@ -157,12 +161,7 @@ def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> 
 
 
 def test_weighting_the_humans_near_the_robot_changes_the_training(recording) -> None:
-    obs, actions, ids, next_obs = rows_of(recording)
-    train, val = ids < 36, ids >= 36
-    seqs = [
-        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon=4, stride=2)
-        for m in (train, val)
-    ]
+    seqs = train_and_validation(recording, horizon=4)
     near = np.linalg.norm(positions(seqs[0].obs)[:, 1:], axis=-1) <= 1.5
     assert 0 < near.mean() < 1  # some humans start near the robot, not all
 
