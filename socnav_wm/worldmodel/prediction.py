@@ -152,9 +152,7 @@ def epsilon_greedy(agent: Any, epsilon: float, seed: int) -> Policy:
 
     def act(obs: np.ndarray, sim: Simulator) -> np.ndarray:
         features = features_of.reset(obs) if not last else features_of.step(obs, last[0])[0]
-        greedy = agent.act(features).cpu().numpy()
-        explore = rng.random(len(obs)) < epsilon
-        actions = np.where(explore, rng.integers(0, NUM_ACTIONS, size=len(obs)), greedy)
+        actions = _explore(rng, epsilon, agent.act(features).cpu().numpy())
         last[:] = [actions]
         return actions
 
@@ -168,11 +166,16 @@ def planner_epsilon_greedy(planner: PlannerFactory, epsilon: float, seed: int) -
     plan, reads_simulator = planner()
 
     def act(obs: np.ndarray, sim: Simulator) -> np.ndarray:
-        planned = np.asarray(plan(sim if reads_simulator else obs), dtype=np.int64)
-        explore = rng.random(len(obs)) < epsilon
-        return np.where(explore, rng.integers(0, NUM_ACTIONS, size=len(obs)), planned)
+        return _explore(rng, epsilon, np.asarray(plan(sim if reads_simulator else obs)))
 
     return act
+
+
+def _explore(rng: np.random.Generator, epsilon: float, chosen: np.ndarray) -> np.ndarray:
+    """``chosen`` (N,) actions, each replaced by a uniform one with probability ``epsilon``
+    (both draws made every step, whatever ``epsilon`` is)."""
+    explore = rng.random(len(chosen)) < epsilon
+    return np.where(explore, rng.integers(0, NUM_ACTIONS, size=len(chosen)), chosen)
 
 
 def model_positions(
@@ -272,8 +275,7 @@ def _by_interaction(
     and 95% t-interval over the rollouts that have one (a human's neighbours in one rollout
     are not independent samples)."""
     horizon = valid.shape[1]
-    out: dict[str, Any] = {"distance": distance, "near": list(NEAR), "share": {}}
-    out["predictors"] = {}
+    out: dict[str, Any] = {"distance": distance, "near": list(NEAR), "share": {}, "predictors": {}}
     for name, label in met.items():
         out["share"][name] = [float(label[valid[:, k], k].mean()) for k in range(horizon)]
     for predictor, errors in errors_of.items():
@@ -401,12 +403,11 @@ def _met(
     near_human = gaps.min(axis=-1) <= distance
     near_obstacle = np.zeros_like(near_human)
     if scene.obstacles is not None:
-        kind, xy, half = scene.obstacles
-        n = kind.shape[0]
+        n = scene.obstacles[0].shape[0]
+        # Each human against its episode's map: the map once per human, env-major.
+        per_human = [np.repeat(a, num_humans, axis=0) for a in scene.obstacles]
         for i, t in enumerate(steps):
-            points = scene.human_xy[t].reshape(-1, 2)  # (N·H, 2), env-major
-            repeat = (np.repeat(a, num_humans, axis=0) for a in (kind, xy, half))
-            _, gap = nearest_points(points, *repeat)
+            _, gap = nearest_points(scene.human_xy[t].reshape(-1, 2), *per_human)
             near_obstacle[i] = (gap.min(axis=-1) <= distance).reshape(n, num_humans)
 
     def so_far(near: np.ndarray) -> np.ndarray:  # (K + 1, N, H) → met by obs[t0 + k]
