@@ -347,13 +347,7 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                 if method in SCENARIO_METHODS:  # the others are where they were evaluated
                     missing.append(f"{preset}/{method}")
                 continue
-            content = read_json(path)
-            if not isinstance(content, dict) or not isinstance(content.get("metrics"), dict):
-                raise ValueError(f"{path}: not an evaluation's metrics file (no `metrics`)")
-            absent = [m for m, _ in TABLE_METRICS if m not in content["metrics"]]
-            if absent:
-                raise ValueError(f"{path}: lacks the metric(s) {', '.join(absent)}")
-            methods[method] = {m: content["metrics"][m] for m, _ in TABLE_METRICS}
+            methods[method] = _table_metrics(path)
         if methods:
             summaries[preset] = methods
         if "oracle-mpc" in methods and "cv-mpc" in methods:
@@ -364,41 +358,47 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             gaps[preset]["room"] = (
                 gaps[preset]["difference"] >= GAP_POINTS and gaps[preset]["low"] > 0
             )
+            others: dict[str, pa.Table] = {}  # read once: the transfers pair with wm-mpc too
             for name, stem in OTHER_PLANNERS.items():
                 if name not in methods:
                     continue
-                episodes = _episodes(
+                others[name] = _episodes(
                     episodes_dir / preset / f"{stem}.parquet",
                     f"{name} − cv-mpc difference of {preset}",
                 )
                 learned.setdefault(preset, {})[name] = {
-                    "versus_physics": _paired(episodes, physics),
-                    "versus_oracle": _paired(episodes, oracle),
+                    "versus_physics": _paired(others[name], physics),
+                    "versus_oracle": _paired(others[name], oracle),
                 }
-            native = methods.get("wm-mpc")
-            for folder in sorted((metrics_dir / preset / TRANSFER_DIR).glob("*/wm-mpc.json")):
-                trained = folder.parent.name
-                content = read_json(folder)
-                if not isinstance(content, dict) or "success" not in content.get("metrics", {}):
-                    raise ValueError(f"{folder}: not an evaluation's metrics file")
-                relative = f"{TRANSFER_DIR}/{trained}/wm-mpc.parquet"
-                needed_by = f"transfer of {trained}'s model to {preset}"
-                episodes = _episodes(episodes_dir / preset / relative, needed_by)
-                own = None
-                if native is not None:
-                    own = _paired(
-                        episodes, _episodes(episodes_dir / preset / "wm-mpc.parquet", needed_by)
-                    )
+            native = others.get("wm-mpc")
+            for path in sorted((metrics_dir / preset / TRANSFER_DIR).glob("*/wm-mpc.json")):
+                trained = path.parent.name
+                episodes = _episodes(
+                    episodes_dir / preset / TRANSFER_DIR / trained / "wm-mpc.parquet",
+                    f"transfer of {trained}'s model to {preset}",
+                )
                 transfer.setdefault(preset, {})[trained] = {
-                    "success": content["metrics"]["success"],
+                    "success": _table_metrics(path)["success"],
                     "versus_physics": _paired(episodes, physics),
-                    "versus_native": own,
+                    "versus_native": None if native is None else _paired(episodes, native),
                 }
     if not summaries:
         raise ValueError(
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
     return ScenarioTable(summaries, gaps, missing, learned, transfer, dqn, split)
+
+
+def _table_metrics(path: Path) -> dict[str, dict[str, float]]:
+    """The :data:`TABLE_METRICS` of an evaluation's metrics file (one line naming the file
+    when it is not one or lacks some)."""
+    content = read_json(path)
+    if not isinstance(content, dict) or not isinstance(content.get("metrics"), dict):
+        raise ValueError(f"{path}: not an evaluation's metrics file (no `metrics`)")
+    absent = [m for m, _ in TABLE_METRICS if m not in content["metrics"]]
+    if absent:
+        raise ValueError(f"{path}: lacks the metric(s) {', '.join(absent)}")
+    return {m: content["metrics"][m] for m, _ in TABLE_METRICS}
 
 
 def _agents(path: Path) -> dict[str, dict[str, Any]]:
