@@ -168,6 +168,13 @@ def bench_plan_command(
             f"[default: {LAYOUT.planning_model(0).as_posix()}]."
         ),
     ] = None,
+    critic: Annotated[
+        Path | None,
+        typer.Option(
+            help="wm-mpc-q's critic, a dueling-dqn agent (another preset's: --overlay's) "
+            f"[default: {LAYOUT.agent('dueling-dqn').as_posix()}]."
+        ),
+    ] = None,
 ) -> None:
     """Decisions per CPU-second of each planner, one core and one torch thread, at the shipped
     batch (`eval.batch_size`) and at 1, 64 and 512 episodes planned together; `--overlay` a
@@ -183,13 +190,17 @@ def bench_plan_command(
                 f"--method: unknown {name!r}; expected one of {', '.join(PLANNER_NAMES)}"
             )
     methods = list(method or PLANNER_NAMES)
-    files = {"wm-mpc": {"planning_model": planning_model}} if planning_model else None
+    files: dict[str, dict[str, Path]] = {}
+    if planning_model:
+        files["wm-mpc"] = files["wm-mpc-q"] = {"planning_model": planning_model}
+    if critic:
+        files["wm-mpc-q"] = {**files.get("wm-mpc-q", {}), "critic": critic}
     if not method:  # by default, skip the learned planners whose models are not there or are
         for name in list(methods):  # another preset's (the loader's one line says which)
             entry = registered(name)
             try:
                 entry.policies(
-                    config.env, files=entry.files((files or {}).get(name)), planning=config.planning
+                    config.env, files=entry.files(files.get(name)), planning=config.planning
                 )
             except (FileNotFoundError, ValueError) as exc:
                 typer.echo(f"skipped {name}: {exc}")
@@ -199,7 +210,7 @@ def bench_plan_command(
     with one_core() as where:
         rows = bench_plan(
             tuple(methods), sizes, env_params=config.env, planning=config.planning,
-            files=files, seconds=seconds,
+            files=files or None, seconds=seconds,
         )  # fmt: skip
     print_table(
         rows,

@@ -202,10 +202,17 @@ def evaluate(
     lstm: Annotated[
         Path | None, typer.Option(help=f"vae-lstm-mpc's LSTM {_default(LAYOUT.lstm)}.")
     ] = None,
+    critic: Annotated[
+        Path | None,
+        typer.Option(
+            help=f"wm-mpc-q's critic, a dueling-dqn agent {_default(LAYOUT.agent('dueling-dqn'))}."
+        ),
+    ] = None,
     transfer: Annotated[bool, typer.Option(help=TRANSFER_HELP)] = False,
 ) -> None:
     """Run one method greedily on the test scenarios: every training seed of an agent
-    (`experiment.seeds`), a baseline, or a planner (cv-mpc, wm-mpc, vae-lstm-mpc, oracle-mpc)
+    (`experiment.seeds`), a baseline, or a planner (cv-mpc, wm-mpc, vae-lstm-mpc, oracle-mpc,
+    wm-mpc-q)
     (stages `evaluate`, `evaluate_baseline`, `evaluate_planner`, `evaluate_wm_mpc`,
     `evaluate_vae_lstm_mpc`)."""
     from socnav_wm.method_names import check_method
@@ -220,7 +227,12 @@ def evaluate(
         metrics_dir=metrics_dir,
         planner_files={
             role: path
-            for role, path in (("planning_model", planning_model), ("vae", vae), ("lstm", lstm))
+            for role, path in (
+                ("planning_model", planning_model),
+                ("vae", vae),
+                ("lstm", lstm),
+                ("critic", critic),
+            )
             if path is not None
         },
         transfer=transfer,

@@ -38,12 +38,14 @@ SCENARIO_METHODS: tuple[str, ...] = ("orca", "sfm", "cv-mpc", "oracle-mpc")
 OTHER_PLANNERS: dict[str, str] = {
     "wm-mpc": "wm-mpc",
     "oracle-mpc (blind)": "blind/oracle-mpc",
+    "wm-mpc-q": "wm-mpc-q",
 }
 """Planners evaluated in some presets only, after the others in the table and compared with
 ``cv-mpc`` and ``oracle-mpc`` where they were: name → their files' path under the preset's
 folders without the suffix. ``wm-mpc`` plans on a model learned in the preset; ``oracle-mpc
 (blind)`` is ``oracle-mpc`` whose clones' humans do not react to the robot
-(``planning.oracle_reactions`` false): what knowing that reaction is worth."""
+(``planning.oracle_reactions`` false): what knowing that reaction is worth; ``wm-mpc-q`` is
+``wm-mpc`` with a critic trained in the preset (its value at the horizon, its actions)."""
 
 TABLE_METRICS: tuple[tuple[str, str], ...] = (
     ("success", "success"),

@@ -46,6 +46,7 @@ MAKES = {
     "planning_model": "socnav-wm train-planning-model --seed {seed}",
     "vae": "socnav-wm train-vae",
     "lstm": "socnav-wm train-lstm",
+    "critic": "socnav-wm train-agent --variant dueling-dqn --seed {seed}",
 }
 """The command that makes the file of each role (``{variant}``, ``{seed}``: which one)."""
 
@@ -172,6 +173,7 @@ _BUILDERS: dict[str, str] = {
     "wm-mpc": "socnav_wm.methods.wm_mpc:build",
     "vae-lstm-mpc": "socnav_wm.methods.vae_lstm_mpc:build",
     "oracle-mpc": "socnav_wm.methods.planners:oracle",
+    "wm-mpc-q": "socnav_wm.methods.wm_mpc_q:build",
 }
 """Each method → ``module:function``, the function that makes its policies. The module is
 imported only when a policy is built, so that a stage executes (and depends on:
@@ -181,6 +183,10 @@ _MODEL_FILES: dict[str, dict[str, Path]] = {
     **{name: {"agent": LAYOUT.agent(name)} for name in VARIANT_NAMES},
     "wm-mpc": {"planning_model": LAYOUT.planning_model(0)},
     "vae-lstm-mpc": {"vae": LAYOUT.vae, "lstm": LAYOUT.lstm},
+    "wm-mpc-q": {
+        "planning_model": LAYOUT.planning_model(0),
+        "critic": LAYOUT.agent("dueling-dqn"),
+    },
 }
 
 _KIND_SECTIONS: dict[str, tuple[Kind, tuple[str, ...]]] = {

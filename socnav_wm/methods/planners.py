@@ -17,10 +17,14 @@ from socnav_wm.planning.params import PlanningParams
 
 
 def planner_policies(
-    method: Method, env_params: EnvParams, planning: PlanningParams, model: Callable[[], Any]
+    method: Method,
+    env_params: EnvParams,
+    planning: PlanningParams,
+    model: Callable[[], Any],
+    critic: Any = None,
 ) -> PolicyFactory:
     """Planner ``method.name`` (its ``planning.per_method`` entry applied) on a fresh
-    ``model()`` for every batch of episodes."""
+    ``model()`` for every batch of episodes, with ``critic`` (``wm-mpc-q``'s agent) if any."""
     resolved = planning.resolved(method.name)
     if resolved.actions != "paper" and method.name != "cv-mpc":
         raise ValueError(
@@ -31,7 +35,7 @@ def planner_policies(
     def fresh() -> tuple[Policy, bool]:
         from socnav_wm.planning.mpc import Planner
 
-        planner = Planner(model(), resolved, env_params)
+        planner = Planner(model(), resolved, env_params, critic)
         return planner.policy(), planner.reads_simulator
 
     return fresh

@@ -25,6 +25,11 @@ class Rollout(Protocol):
         """Advance every future by one action (B,); the predicted positions (B, 1 + H, 2)."""
         ...
 
+    def velocities(self) -> np.ndarray:
+        """The futures' per-step velocities (B, 1 + H, 2) in the robot's frame after the last
+        step (what the next step will move them by; a critic reads the humans' headings)."""
+        ...
+
 
 class PlanningModel(Protocol):
     """Follows the real episodes and imagines futures from the present."""
@@ -57,6 +62,9 @@ class _ConstantVelocityRollout:
         motion = commands_of(actions, self.params)
         self.points, self.velocity = advance(self.points, self.velocity, motion, self.params.dt)
         return self.points
+
+    def velocities(self) -> np.ndarray:
+        return self.velocity
 
 
 class ConstantVelocityModel:

@@ -15,6 +15,10 @@ At every step, for every episode at once:
 4. the first action of the best candidate is executed (ties: the first in the table), and the
    plan is made afresh at the next step.
 
+With a critic (``wm-mpc-q``, :mod:`socnav_wm.planning.critic`), a trained agent reads the
+observation of each imagined step: the ``policy`` continuation follows its greedy action, and a
+future still running at the horizon gains ``value_weight · γ^horizon`` times its value.
+
 Walls are not in the observation, so a model that predicts from observations does not see them.
 With ``walls`` (the default) the planner itself knows the room, its tables and plants, and the
 robot's pose in it, as a robot with a map and localisation does: it moves the imagined robot by
@@ -27,7 +31,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -36,7 +40,7 @@ from socnav_wm.env.obstacles import nearest_points, obstacle_map
 from socnav_wm.env.params import EnvParams
 from socnav_wm.planning.models import PlanningModel
 from socnav_wm.planning.params import PlanningParams
-from socnav_wm.worldmodel.ego import advance_pose, commands_of
+from socnav_wm.worldmodel.ego import Motion, advance_pose, commands_of
 
 STOP, FORWARD, LEFT, RIGHT = range(NUM_ACTIONS)
 
@@ -103,10 +107,12 @@ def candidate_actions(
     goal: np.ndarray,
     env_params: EnvParams,
     commands: np.ndarray | None = None,
+    policy: np.ndarray | None = None,
 ) -> np.ndarray:
     """Step ``k``'s action of every future, futures in candidate order repeated per episode:
     the prefix's while ``k`` is within it, then the continuation's (``goal`` from the futures'
-    robot-frame goals (B, 2)). Discrete actions (B,), or with a lattice (``commands``, the
+    robot-frame goals (B, 2); ``policy`` from ``policy``, a critic's action (B,) for every
+    future). Discrete actions (B,), or with a lattice (``commands``, the
     :func:`command_table`) continuous commands (B, 2)."""
     conts = len(continuations)
     batch = len(goal)
@@ -116,6 +122,11 @@ def candidate_actions(
         index = prefix_table[rows_of // conts, k]
         return index if commands is None else commands[index]
     continuation_of = rows_of % conts
+    if "policy" in continuations and (policy is None or commands is not None):
+        raise ValueError(
+            "planning.continuations: 'policy' follows a critic's discrete actions "
+            "(wm-mpc-q, on the paper's actions)"
+        )
     if commands is not None:
         out = np.empty((batch, 2))
         for c, name in enumerate(continuations):
@@ -127,9 +138,33 @@ def candidate_actions(
         rows = continuation_of == c
         if name == "goal":
             actions[rows] = towards_goal(goal[rows], env_params)
+        elif name == "policy":
+            actions[rows] = policy[rows]
         else:
             actions[rows] = {"stop": STOP, "forward": FORWARD}[name]
     return actions
+
+
+class Imagined(Protocol):
+    """The observations of a batch of imagined futures (a critic's, :meth:`Critic.imagine`)."""
+
+    def observe(self, points: np.ndarray, velocity: np.ndarray, motion: Motion) -> np.ndarray:
+        """The observations (B, obs_dim) after a step: the predicted positions and per-step
+        velocities (B, 1 + H, 2) in the robot's new frame and the robot's command."""
+        ...
+
+
+class Critic(Protocol):
+    """What values imagined futures (:class:`socnav_wm.planning.critic.AgentCritic`, imported
+    by ``wm-mpc-q``'s builder only: torch and the agent file stay out of the other planners)."""
+
+    def imagine(self, obs: np.ndarray, repeats: int) -> Imagined:
+        """The futures' observations, ``repeats`` per episode from its observation (N, D)."""
+        ...
+
+    def evaluate(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Greedy actions (B,) and values (B,) of observations (B, D)."""
+        ...
 
 
 def step_gain(
@@ -160,10 +195,24 @@ class Planner:
         model: a :class:`~socnav_wm.planning.models.PlanningModel`, following the episodes.
         params: the ``planning`` section.
         env_params: the scenarios' parameters (radii, goal and discomfort distances, turn step).
+        critic: a :class:`Critic` (``wm-mpc-q``'s trained agent): the
+            ``policy`` continuation and the value at the horizon. Without one, ``policy`` is
+            refused.
     """
 
-    def __init__(self, model: PlanningModel, params: PlanningParams, env_params: EnvParams):
+    def __init__(
+        self,
+        model: PlanningModel,
+        params: PlanningParams,
+        env_params: EnvParams,
+        critic: Critic | None = None,
+    ):
+        if critic is None and "policy" in params.continuations:
+            raise ValueError(
+                "planning.continuations: 'policy' needs a critic (an agent); only wm-mpc-q has one"
+            )
         self.model, self.params, self.env_params = model, params, env_params
+        self.critic = critic
         self.commands = command_table(params, env_params)
         self.prefixes = prefixes(params.prefix_length, params.num_actions)
         self.num_candidates = len(self.prefixes) * len(params.continuations)
@@ -174,14 +223,21 @@ class Planner:
         pose: np.ndarray | None = None,
         obstacles: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
         rows: np.ndarray | None = None,
+        obs: np.ndarray | None = None,
     ) -> np.ndarray:
         """(N, candidates) predicted returns from the model's present, where the goal is at
         ``goal_now`` (N, 2) in the robot frame; candidate ``p · len(continuations) + c`` is
         prefix ``p`` followed by continuation ``c``. With ``pose`` (N, 3: the robot's x, y, θ
         in the room), touching a wall is a collision, and so is touching one of ``obstacles``
         (each episode's tables and plants: kinds (N, O), centres (N, O, 2), half sizes).
-        ``rows``: the model's episodes these are (indices; None: all of them, in order)."""
+        ``rows``: the model's episodes these are (indices; None: all of them, in order).
+        ``obs`` (N, obs_dim): their observations now, which a critic needs."""
         p, e = self.params, self.env_params
+        imagined = policy = None
+        if self.critic is not None:
+            if obs is None:
+                raise ValueError("a planner with a critic needs the observations")
+            imagined = self.critic.imagine(obs, self.num_candidates)
         num_episodes = len(goal_now)
         s = self.num_candidates
         rollout = self.model.rollout(s, pose, rows)
@@ -197,8 +253,13 @@ class Planner:
             obstacles = tuple(np.repeat(a, s, axis=0) for a in obstacles)
             obstacle_limit = e.robot_radius + p.safety_margin
         for k in range(p.horizon):
-            actions = candidate_actions(self.prefixes, p.continuations, k, goal, e, self.commands)
+            actions = candidate_actions(
+                self.prefixes, p.continuations, k, goal, e, self.commands, policy
+            )
             predicted = rollout.step(actions)
+            if imagined is not None:
+                seen = imagined.observe(predicted, rollout.velocities(), commands_of(actions, e))
+                policy, value = self.critic.evaluate(seen)
             goal = predicted[:, 0]
             new_goal_distance = np.hypot(goal[:, 0], goal[:, 1])
             centre = np.hypot(predicted[:, 1:, 0], predicted[:, 1:, 1]).min(axis=1)
@@ -218,6 +279,8 @@ class Planner:
             )
             alive &= ~(collided | reached)
             goal_distance = new_goal_distance
+        if imagined is not None:  # the critic's value of the futures still running
+            score += np.where(alive, p.value_weight * p.discount**p.horizon * value, 0.0)
         return score.reshape(num_episodes, s)
 
     def act(
@@ -241,6 +304,7 @@ class Planner:
                 None if pose is None else pose[rows],
                 None if obstacles is None else tuple(a[rows] for a in obstacles),
                 rows,
+                None if self.critic is None else np.asarray(obs)[rows],
             )
             best = scores.argmax(axis=1)  # the first of equal scores
             first[rows] = self.prefixes[best // len(self.params.continuations), 0]

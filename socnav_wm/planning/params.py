@@ -11,15 +11,17 @@ from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
 from socnav_wm.section import Section, Seed, as_tuple, finite, seed_field
 
-PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc")
+PLANNER_NAMES: tuple[str, ...] = ("cv-mpc", "wm-mpc", "vae-lstm-mpc", "oracle-mpc", "wm-mpc-q")
 """The planning methods: receding-horizon control over the paper's four actions, each with its
 model of the goal and the humans: ``cv-mpc`` constant velocity (no learning), ``wm-mpc`` the
 planning world model (``train_planning_model``'s seed 0), ``vae-lstm-mpc`` the paper's VAE +
-LSTM, ``oracle-mpc`` the simulator itself (the ceiling of the four actions)."""
+LSTM, ``oracle-mpc`` the simulator itself (the ceiling of the four actions); ``wm-mpc-q`` is
+``wm-mpc`` with a trained agent as its critic: the agent's value at the horizon, its greedy
+actions as the ``policy`` continuation (:mod:`socnav_wm.planning.critic`)."""
 
 MAX_PREFIXES = 1024
 """The most prefixes a planner scores (each with every continuation)."""
-Continuation = Literal["goal", "stop", "forward"]
+Continuation = Literal["goal", "stop", "forward", "policy"]
 ActionSet = Literal["paper", "lattice"]
 CONTINUATIONS: tuple[str, ...] = ("goal", "stop", "forward")
 
@@ -64,7 +66,8 @@ class PlanningParams(Section):
     directions, evenly round the circle (holonomic)."""
     continuations: Continuations = CONTINUATIONS
     """What follows a prefix: ``goal`` (turn towards the predicted goal, then advance), ``stop``,
-    ``forward``."""
+    ``forward``; ``policy``, the critic's greedy action on each imagined observation (a planner
+    with a critic only: ``wm-mpc-q``)."""
     discount: float = finite(0.95, gt=0, le=1)
     """Weight γᵏ of step k's terms: the same outcome sooner scores higher."""
     goal_reward: float = finite(10.0, ge=0)
@@ -76,6 +79,11 @@ class PlanningParams(Section):
     ``discomfort_distance`` (0.9999 m, the paper's) surface to surface."""
     progress_weight: float = finite(1.0, ge=0)
     """Weight of each step's progress towards the goal (metres)."""
+    value_weight: float = finite(10.0, ge=0)
+    """A planner with a critic (``wm-mpc-q``): a candidate still running at the horizon gains
+    ``value_weight · γ^horizon · max_a Q(ô, a)``, the critic's value of its imagined last
+    observation ``ô``. The agent's return is about +1 for the goal and −1 for a failure, so 10
+    weighs it as ``goal_reward`` and ``collision_cost`` do."""
     safety_margin: float = finite(0.0, ge=0)
     """Added to the radii when testing a predicted contact (m)."""
     walls: bool = True
@@ -91,11 +99,15 @@ class PlanningParams(Section):
     """``oracle-mpc``: false, the clones' humans do not react to the robot (whatever
     ``env.humans_see_robot``): what knowing their reaction is worth to the ceiling."""
     per_method: dict[str, dict[str, Any]] = Field(
-        default_factory=lambda: {"vae-lstm-mpc": {"prefix_length": 2, "horizon": 6}}
+        default_factory=lambda: {
+            "vae-lstm-mpc": {"prefix_length": 2, "horizon": 6},
+            "wm-mpc-q": {"continuations": [*CONTINUATIONS, "policy"]},
+        }
     )
     """Per-planner overrides of the fields above. ``vae-lstm-mpc`` runs a 256-unit LSTM and the
     VAE's decoder for every candidate and step, 40–75 ms of one core per decision at the shared
-    64 candidates × 12 steps; its 16 × 6 keep a 500-scenario evaluation within minutes."""
+    64 candidates × 12 steps; its 16 × 6 keep a 500-scenario evaluation within minutes.
+    ``wm-mpc-q`` adds the ``policy`` continuation to the shared ones."""
 
     @model_validator(mode="after")
     def _consistent(self) -> Self:

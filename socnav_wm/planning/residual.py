@@ -45,6 +45,9 @@ class _ResidualRollout:
         self.imagined += 1
         return self.points.numpy().astype(np.float64)
 
+    def velocities(self) -> np.ndarray:
+        return self.velocity.numpy().astype(np.float64)
+
 
 class ResidualPlanningModel(ConstantVelocityModel):
     """A :class:`~socnav_wm.planning.models.PlanningModel` that follows the episodes as the

@@ -58,6 +58,9 @@ STAGE_MODULES: dict[str, str] = {
     "scenario_vae": "socnav_wm.stages.train_vae",
     "scenario_lstm": "socnav_wm.stages.train_lstm",
     "scenario_dqn": "socnav_wm.studies.runner",
+    # scenarios/dvc.yaml: wm-mpc-q, with a dueling-dqn agent trained in the preset as its critic.
+    "scenario_critic": "socnav_wm.stages.train_agent",
+    "scenario_wm_mpc_q": "socnav_wm.stages.evaluate",
     "scenarios_report": "socnav_wm.stages.scenarios_report",
 }
 """Stage name → the module its command runs."""
@@ -78,6 +81,7 @@ STAGE_METHODS: dict[str, tuple[str, ...]] = {
     "scenario_blind_oracle": ("oracle-mpc",),
     "scenario_transfer": ("wm-mpc",),
     "scenario_dqn": VARIANT_NAMES,
+    "scenario_wm_mpc_q": ("wm-mpc-q",),
 }
 """Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).
 The registry imports a method's builder only when it builds a policy, out of the imports'
