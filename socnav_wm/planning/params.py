@@ -79,11 +79,12 @@ class PlanningParams(Section):
     ``discomfort_distance`` (0.9999 m, the paper's) surface to surface."""
     progress_weight: float = finite(1.0, ge=0)
     """Weight of each step's progress towards the goal (metres)."""
-    value_weight: float = finite(10.0, ge=0)
+    value_weight: float = finite(1.0, ge=0)
     """A planner with a critic (``wm-mpc-q``): a candidate still running at the horizon gains
     ``value_weight · γ^horizon · max_a Q(ô, a)``, the critic's value of its imagined last
     observation ``ô``. The agent's return is about +1 for the goal and −1 for a failure, so 10
-    weighs it as ``goal_reward`` and ``collision_cost`` do."""
+    would weigh it as ``goal_reward`` and ``collision_cost``; with the critics trained here that
+    hands the robot to the agent (docs/scenarios.md), hence 1."""
     safety_margin: float = finite(0.0, ge=0)
     """Added to the radii when testing a predicted contact (m)."""
     walls: bool = True
