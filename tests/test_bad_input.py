@@ -141,6 +141,19 @@ def test_damaged_planning_models_are_named_in_one_line(workdir: Path, made) -> N
     assert "weights_only" not in message
 
 
+def test_a_critic_that_is_not_a_dueling_dqn_agent_is_one_line(workdir: Path, made) -> None:
+    p3 = made["p3"]
+    wm_mpc_q = ("evaluate", "--method", "wm-mpc-q", "--planning-model", p3, "--critic")
+    assert refused(workdir, *wm_mpc_q, p3) == f"{p3}: not a socnav-wm agent file"
+    missing = workdir / "nope.pt"
+    assert refused(workdir, *wm_mpc_q, missing) == (
+        f"{missing}: no such critic file (make it: socnav-wm train-agent --variant dueling-dqn "
+        "--seed 0)"
+    )
+    message = refused(workdir, "evaluate", "--method", "cv-mpc", "--critic", p3)
+    assert message == "planner 'cv-mpc' reads no critic file (it reads: none)"
+
+
 # ------------------------------------------------------------------ 2: other scenarios
 
 

@@ -3,6 +3,8 @@ the horizon, and the method end to end from its files."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -155,6 +157,8 @@ def test_the_agent_critic_is_its_q_networks_argmax_and_max(critic_file) -> None:
     np.testing.assert_allclose(values, q.max(dim=1).values.numpy(), rtol=1e-6)
     with pytest.raises(ValueError, match="observations have 37"):
         AgentCritic(agent, ENV.replace(num_humans=5))
+    with pytest.raises(ValueError, match=r"not a world model's features \(maspm\)"):
+        AgentCritic(SimpleNamespace(variant_name="maspm"), ENV, "maspm.pt")
 
 
 def test_wm_mpc_q_evaluates_from_its_files_and_refuses_another_scenarios_agent(
