@@ -63,7 +63,7 @@ from socnav_wm.evaluation.results import (
 )
 from socnav_wm.evaluation.scenes import scenarios_gif
 from socnav_wm.io import write_json_atomic, write_text_atomic
-from socnav_wm.method_names import METHOD_NAMES
+from socnav_wm.method_names import REPORTED_METHOD_NAMES
 from socnav_wm.metrics import ALL_METRICS, PAPER_METRICS
 
 __all__ = ["FIGURE_NAMES", "ReportResult", "build_report"]
@@ -160,7 +160,7 @@ def build_report(
     env_params: EnvParams | None = None,
     scenario_seed: int | None = None,
     report: ReportParams,
-    methods: Sequence[str] = METHOD_NAMES,
+    methods: Sequence[str] = REPORTED_METHOD_NAMES,
     solved_window: int,
     solved_success_rate: float,
     gif_size: int = 200,
