@@ -97,6 +97,8 @@ def test_bench_plan_of_a_preset_skips_the_models_of_another_in_one_line() -> Non
         "the params have 10 humans in a 10.0 m room",
         "skipped vae-lstm-mpc: models/vae.pt: trained with 3 humans in a 10.0 m room; "
         "the params have 10 humans in a 10.0 m room",
+        "skipped wm-mpc-q: models/planning/seed-0.pt: trained with 3 humans in a 10.0 m room; "
+        "the params have 10 humans in a 10.0 m room",
     ]
     rows = [line for line in result.output.splitlines() if line.startswith("│")]
     assert [row.split("│")[1].strip() for row in rows] == ["cv-mpc", "oracle-mpc"]
