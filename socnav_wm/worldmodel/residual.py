@@ -52,6 +52,19 @@ def _unrotate(x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor
     return torch.stack([c * x[..., 0] - s * x[..., 1], s * x[..., 0] + c * x[..., 1]], dim=-1)
 
 
+def _off_diagonal(x: torch.Tensor) -> torch.Tensor:
+    """(B, H, H + 1, 2) → (B, H, H, 2) without the entries (i, i). In the flattened (H, H + 1)
+    block, row i's H + 1 entries after its own lie between two diagonal ones, so slices of one
+    view pick them (a boolean mask would find them anew at every call, several times slower);
+    the gradient flows back through the same copies, bit for bit as through the mask."""
+    b, h = x.shape[0], x.shape[1]
+    if h < 2:
+        return x[:, :, 1:]
+    flat = x.reshape(b, h * (h + 1), 2)[:, 1:]
+    body = flat[:, : (h - 1) * (h + 2)].reshape(b, h - 1, h + 2, 2)[:, :, : h + 1]
+    return torch.cat([body.reshape(b, -1, 2), flat[:, -1:]], dim=1).reshape(b, h, h, 2)
+
+
 def ego_advance(
     points: torch.Tensor, velocity: torch.Tensor, v: torch.Tensor, omega: torch.Tensor, dt: float
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -201,9 +214,7 @@ class ResidualDynamics(nn.Module):
         rel_p = others_p[:, None, :, :] - p[:, :, None, :]  # (B, H, H + 1, 2)
         rel_u = others_u[:, None, :, :] - u[:, :, None, :]
         # Drop each human's own entry: the others in spawn order, then the robot.
-        keep = ~torch.eye(h, h + 1, dtype=torch.bool, device=p.device)
-        rel_p = rel_p[:, keep].reshape(-1, h, h, 2)
-        rel_u = rel_u[:, keep].reshape(-1, h, h, 2)
+        rel_p, rel_u = _off_diagonal(rel_p), _off_diagonal(rel_u)
         if self.neighbours is not None:  # the K nearest others, nearest first; then the robot
             distance = torch.linalg.vector_norm(rel_p[:, :, : h - 1].detach(), dim=-1)
             order = torch.argsort(distance, dim=-1, stable=True)[..., : self.seen]

@@ -307,3 +307,39 @@ def test_a_model_of_the_nearest_neighbours_ignores_the_order_and_the_far_humans(
     result = residual.ResidualTrainResult(model=model, history=[], metrics={})
     planning_file.save_residual(path, result, {"seed": 0})
     assert planning_file.load_residual(path).neighbours == 2
+
+
+@pytest.mark.parametrize("humans", [1, 2, 3, 7, 20])
+def test_the_others_seen_from_each_human_leave_out_exactly_its_own_entry(humans) -> None:
+    """_off_diagonal picks the entries a boolean mask of the diagonal keeps, in the same order,
+    and the gradient flows back through it bit for bit as through the mask."""
+    keep = ~torch.eye(humans, humans + 1, dtype=torch.bool)
+    x = torch.randn(4, humans, humans + 1, 2, requires_grad=True)
+    ours = residual._off_diagonal(x)
+    theirs = x[:, keep].reshape(-1, humans, humans, 2)
+    assert torch.equal(ours, theirs)
+    weight = torch.randn_like(ours)
+    (g_ours,) = torch.autograd.grad((ours * weight).sum(), x)
+    (g_theirs,) = torch.autograd.grad((theirs * weight).sum(), x)
+    assert torch.equal(g_ours, g_theirs)
+
+
+def test_futures_imagined_in_chunks_are_those_imagined_at_once(recording, monkeypatch) -> None:
+    """The planner's rollouts run the model on chunks of whole episodes (about CHUNK_AGENTS
+    humans): any chunking gives the same positions and velocities, bit for bit."""
+    from socnav_wm.planning import residual as planning_residual
+
+    model = ResidualPlanningModel(perturbed(3), ENV)
+    model.reset(recording.obs[0])
+    model.observe(recording.obs[1], recording.actions[0])
+    actions = np.random.default_rng(0).integers(0, 4, size=(5, 48 * 7))
+    runs = []
+    # One chunk; 5 episodes' 7 futures (the last chunk 3 episodes); one episode, at least.
+    for agents, chunks in ((10**6, 1), (3 * 7 * 5, 10), (1, 48)):
+        monkeypatch.setattr(planning_residual, "CHUNK_AGENTS", agents)
+        rollout = model.rollout(7)
+        assert len(rollout.chunks) == chunks
+        runs.append([(rollout.step(a), rollout.velocities()) for a in actions])
+    for other in runs[1:]:
+        for (p, u), (q, w) in zip(runs[0], other, strict=True):
+            assert np.array_equal(p, q) and np.array_equal(u, w)
