@@ -16,15 +16,31 @@ from socnav_wm.planning.models import ConstantVelocityModel, Rollout
 from socnav_wm.worldmodel.residual import ResidualDynamics
 
 CHUNK_AGENTS = 4096
-"""Humans (futures × humans per scene) per call of the model, about: the futures are imagined
-in chunks of whole episodes, whose temporaries stay in the caches (at 64 episodes of 20
-humans, one call over all 12,288 futures took about 1.6 times as long per future as calls over
-one or two episodes' 192; ``socnav-wm bench plan``). A chunk holds at least one episode's
+"""Humans (distinct futures × humans per scene) per call of the model, about: the futures are
+imagined in chunks of whole episodes, whose temporaries stay in the caches (at 64 episodes of
+20 humans, one call over all 12,288 futures took about 1.6 times as long per future as calls
+over one or two episodes' 192; ``socnav-wm bench plan``). A chunk holds at least one episode's
 futures, so an episode is imagined exactly as when it is planned alone (a matrix product of a
 few rows can round otherwise than one of many)."""
 
+MIN_ROWS = 16
+"""Rows (humans) of one call of the model at least: a chunk with fewer is padded with copies
+of its own futures. This torch build's matrix products take another path, which rounds
+otherwise, for 1–3 rows and agree from 4 rows on; with the futures imagined once, a chunk can
+be that small (one episode whose candidates all agree on their first step)."""
+
 
 class _ResidualRollout:
+    """The futures of a batch, each distinct one imagined once.
+
+    Futures that have taken the same actions from the same present are the same future: the
+    candidates share their first actions (``4**k`` distinct ones at step k < prefix_length out of
+    every candidate), and a continuation that agrees with another (``goal`` going straight
+    ahead as ``forward`` does) follows it. So the rollout keeps the distinct futures only
+    (``self.points`` …, episode-major) and which one each row is (``self.row``); a step
+    imagines each distinct (future, action) pair once.
+    """
+
     def __init__(
         self,
         model: ResidualDynamics,
@@ -35,34 +51,67 @@ class _ResidualRollout:
         repeats: int,
     ) -> None:
         self.model, self.table = model, table
-        episodes = max(1, CHUNK_AGENTS // max(1, repeats * model.num_humans))
-        size = episodes * max(1, repeats)
-        self.chunks = [slice(i, i + size) for i in range(0, max(len(points), 1), size)]
-        self.points = [torch.as_tensor(points[c], dtype=torch.float32) for c in self.chunks]
-        self.velocity = [torch.as_tensor(velocity[c], dtype=torch.float32) for c in self.chunks]
-        self.pose = [
-            None if pose is None else torch.as_tensor(pose[c], dtype=torch.float32)
-            for c in self.chunks
-        ]
+        # At the start every future of an episode is its present.
+        self.row = np.repeat(np.arange(len(points) // max(1, repeats)), repeats)
+        self.episode = np.arange(len(points) // max(1, repeats))
+        present = np.arange(0, len(points), max(1, repeats))
+        self.points = torch.as_tensor(points[present], dtype=torch.float32)
+        self.velocity = torch.as_tensor(velocity[present], dtype=torch.float32)
+        self.pose = None if pose is None else torch.as_tensor(pose[present], dtype=torch.float32)
         self.imagined = 0
 
+    def _chunks(self) -> list[slice]:
+        """Runs of whole episodes of the distinct futures, about CHUNK_AGENTS humans each."""
+        starts = np.flatnonzero(np.diff(self.episode, prepend=-1))
+        ends = np.append(starts[1:], len(self.episode))
+        chunks, first, size = [], 0, 0
+        per_future = max(1, self.model.num_humans)
+        for start, end in zip(starts, ends, strict=True):
+            if size and size + (end - start) * per_future > CHUNK_AGENTS:
+                chunks.append(slice(first, start))
+                first, size = start, 0
+            size += (end - start) * per_future
+        if len(self.episode):
+            chunks.append(slice(first, len(self.episode)))
+        return chunks
+
     def step(self, actions: np.ndarray) -> np.ndarray:
-        a = torch.as_tensor(np.asarray(actions, dtype=np.int64))
+        actions = np.asarray(actions, dtype=np.int64)
+        k, self.imagined = self.imagined, self.imagined + 1
+        if not len(self.row):
+            return np.zeros((0, *self.points.shape[1:]))
+        pairs, self.row = np.unique(self.row * len(self.table) + actions, return_inverse=True)
+        parent = torch.as_tensor(pairs // len(self.table))
+        command = self.table[torch.as_tensor(pairs % len(self.table))]
+        self.episode = self.episode[pairs // len(self.table)]
+        points, velocity = self.points[parent], self.velocity[parent]
+        pose = None if self.pose is None else self.pose[parent]
+        out: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]] = []
         with torch.no_grad():
-            for i, c in enumerate(self.chunks):
-                self.points[i], self.velocity[i], self.pose[i] = self.model.step(
-                    self.points[i],
-                    self.velocity[i],
-                    self.table[a[c], 0],
-                    self.table[a[c], 1],
-                    self.pose[i],
-                    self.imagined,
+            for c in self._chunks():
+                size = c.stop - c.start
+                humans = size * max(1, self.model.num_humans)
+                rows = (
+                    c
+                    if humans >= MIN_ROWS
+                    else torch.arange(c.start, c.stop).repeat(-(-MIN_ROWS // humans))
                 )
-        self.imagined += 1
-        return torch.cat(self.points).numpy().astype(np.float64)
+                step = self.model.step(
+                    points[rows],
+                    velocity[rows],
+                    command[rows, 0],
+                    command[rows, 1],
+                    None if pose is None else pose[rows],
+                    k,
+                )
+                out.append(tuple(None if x is None else x[:size] for x in step))
+        self.points = torch.cat([o[0] for o in out])
+        self.velocity = torch.cat([o[1] for o in out])
+        self.pose = None if pose is None else torch.cat([o[2] for o in out])
+        return self.points.numpy()[self.row].astype(np.float64)
 
     def velocities(self) -> np.ndarray:
-        return torch.cat(self.velocity).numpy().astype(np.float64)
+        return self.velocity.numpy()[self.row].astype(np.float64)
 
 
 class ResidualPlanningModel(ConstantVelocityModel):

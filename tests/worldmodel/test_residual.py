@@ -324,22 +324,48 @@ def test_the_others_seen_from_each_human_leave_out_exactly_its_own_entry(humans)
     assert torch.equal(g_ours, g_theirs)
 
 
-def test_futures_imagined_in_chunks_are_those_imagined_at_once(recording, monkeypatch) -> None:
-    """The planner's rollouts run the model on chunks of whole episodes (about CHUNK_AGENTS
-    humans): any chunking gives the same positions and velocities, bit for bit."""
+def test_futures_imagined_once_and_in_chunks_are_those_imagined_one_by_one(
+    recording, monkeypatch
+) -> None:
+    """The planner's rollouts imagine each distinct future once (futures that took the same
+    actions from the same present are one), in chunks of whole episodes (about CHUNK_AGENTS
+    humans): any chunking gives, bit for bit, the positions and velocities of the model run on
+    every future's own row."""
     from socnav_wm.planning import residual as planning_residual
 
     model = ResidualPlanningModel(perturbed(3), ENV)
     model.reset(recording.obs[0])
     model.observe(recording.obs[1], recording.actions[0])
-    actions = np.random.default_rng(0).integers(0, 4, size=(5, 48 * 7))
-    runs = []
-    # One chunk; 5 episodes' 7 futures (the last chunk 3 episodes); one episode, at least.
-    for agents, chunks in ((10**6, 1), (3 * 7 * 5, 10), (1, 48)):
+    # 7 futures per episode: the first two steps shared by some, as a planner's prefixes are.
+    rng = np.random.default_rng(0)
+    actions = rng.integers(0, 4, size=(5, 48 * 7))
+    actions[0] = np.repeat(rng.integers(0, 4, size=48 * 7 // 4), 4)  # runs of 4 alike
+    actions[1, ::7] = actions[1, 1::7]
+    net, table = model.net, model.table
+    start = model.rollout(7)
+    points = torch.as_tensor(np.repeat(model._points, 7, axis=0), dtype=torch.float32)
+    velocity = torch.as_tensor(np.repeat(model._velocity, 7, axis=0), dtype=torch.float32)
+    reference = []
+    with torch.no_grad():
+        for k, a in enumerate(actions):
+            command = table[torch.as_tensor(a)]
+            points, velocity, _ = net.step(points, velocity, command[:, 0], command[:, 1], None, k)
+            reference.append(
+                (points.numpy().astype(np.float64), velocity.numpy().astype(np.float64))
+            )
+    assert start.points.shape[0] == 48  # one present per episode
+    # One chunk; chunks of 35 futures' humans at most; one episode each.
+    for agents, fewest in ((10**6, 1), (3 * 7 * 5, 2), (1, 48)):
         monkeypatch.setattr(planning_residual, "CHUNK_AGENTS", agents)
         rollout = model.rollout(7)
-        assert len(rollout.chunks) == chunks
-        runs.append([(rollout.step(a), rollout.velocities()) for a in actions])
-    for other in runs[1:]:
-        for (p, u), (q, w) in zip(runs[0], other, strict=True):
-            assert np.array_equal(p, q) and np.array_equal(u, w)
+        for k, (a, (p, u)) in enumerate(zip(actions, reference, strict=True)):
+            assert np.array_equal(rollout.step(a), p) and np.array_equal(rollout.velocities(), u)
+            # As many futures as distinct (episode, actions so far) histories.
+            histories = np.column_stack((np.arange(48 * 7) // 7, actions[: k + 1].T))
+            assert rollout.points.shape[0] == len(np.unique(histories, axis=0))
+            assert k > 0 or rollout.points.shape[0] < 48 * 7 / 2
+            chunks = rollout._chunks()
+            episodes = [len(np.unique(rollout.episode[c])) for c in chunks]
+            assert sum(episodes) == 48 and len(chunks) >= fewest
+            for c, n in zip(chunks, episodes, strict=True):  # whole episodes, within the size
+                assert n == 1 or (c.stop - c.start) * ENV.num_humans <= agents
