@@ -38,7 +38,8 @@ class _ResidualRollout:
     every candidate), and a continuation that agrees with another (``goal`` going straight
     ahead as ``forward`` does) follows it. So the rollout keeps the distinct futures only
     (``self.points`` …, episode-major) and which one each row is (``self.row``); a step
-    imagines each distinct (future, action) pair once.
+    imagines each distinct (future, action) pair once. ``points``, ``velocity`` (N, 1 + H, 2)
+    and ``pose`` (N, 3): the N episodes' presents, each the start of ``repeats`` futures.
     """
 
     def __init__(
@@ -51,13 +52,12 @@ class _ResidualRollout:
         repeats: int,
     ) -> None:
         self.model, self.table = model, table
-        # At the start every future of an episode is its present.
-        self.row = np.repeat(np.arange(len(points) // max(1, repeats)), repeats)
-        self.episode = np.arange(len(points) // max(1, repeats))
-        present = np.arange(0, len(points), max(1, repeats))
-        self.points = torch.as_tensor(points[present], dtype=torch.float32)
-        self.velocity = torch.as_tensor(velocity[present], dtype=torch.float32)
-        self.pose = None if pose is None else torch.as_tensor(pose[present], dtype=torch.float32)
+        # At the start the futures are their episodes' presents: ``repeats`` rows each.
+        self.row = np.repeat(np.arange(len(points)), repeats)
+        self.episode = np.arange(len(points))
+        self.points = torch.as_tensor(points, dtype=torch.float32)
+        self.velocity = torch.as_tensor(velocity, dtype=torch.float32)
+        self.pose = None if pose is None else torch.as_tensor(pose, dtype=torch.float32)
         self.imagined = 0
 
     def _chunks(self) -> list[slice]:
@@ -81,9 +81,10 @@ class _ResidualRollout:
         if not len(self.row):
             return np.zeros((0, *self.points.shape[1:]))
         pairs, self.row = np.unique(self.row * len(self.table) + actions, return_inverse=True)
-        parent = torch.as_tensor(pairs // len(self.table))
-        command = self.table[torch.as_tensor(pairs % len(self.table))]
-        self.episode = self.episode[pairs // len(self.table)]
+        parent, action = np.divmod(pairs, len(self.table))
+        command = self.table[torch.as_tensor(action)]
+        self.episode = self.episode[parent]
+        parent = torch.as_tensor(parent)
         points, velocity = self.points[parent], self.velocity[parent]
         pose = None if self.pose is None else self.pose[parent]
         out: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]] = []
@@ -136,9 +137,9 @@ class ResidualPlanningModel(ConstantVelocityModel):
             )
         return _ResidualRollout(
             self.net,
-            np.repeat(self._points[chosen], repeats, axis=0),
-            np.repeat(self._velocity[chosen], repeats, axis=0),
-            None if pose is None else np.repeat(np.asarray(pose), repeats, axis=0),
+            self._points[chosen],
+            self._velocity[chosen],
+            None if pose is None else np.asarray(pose),
             self.table,
             repeats,
         )
