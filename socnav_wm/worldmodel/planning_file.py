@@ -41,6 +41,7 @@ def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, An
         # Only a model that sees its K nearest records it: the others' payload stays what it
         # was before the option existed.
         **({"neighbours": result.model.neighbours} if result.model.neighbours else {}),
+        **({"holonomic": True} if result.model.holonomic else {}),
         "settings": settings,
         "metrics": result.metrics,
         "env": result.env,
@@ -88,6 +89,7 @@ def load_residual(
             data.get("max_speed"),
             data.get("room_half"),
             data.get("neighbours"),
+            bool(data.get("holonomic", False)),
         )
         model.load_state_dict(data["state_dict"])
     except (KeyError, TypeError, RuntimeError) as exc:

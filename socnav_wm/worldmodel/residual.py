@@ -79,6 +79,16 @@ def ego_advance(
     return moved - shift, _rotate(velocity, c, s)
 
 
+def ego_advance_holonomic(
+    points: torch.Tensor, velocity: torch.Tensor, vx: torch.Tensor, vy: torch.Tensor, dt: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`ego_advance` for the holonomic robot, which translates by ``(vx, vy)·dt`` in its
+    frame and never turns: the points move by ``velocity``, then by minus the robot's step; the
+    velocities stay as they are."""
+    step = torch.stack([vx * dt, vy * dt], dim=-1)[:, None, :]
+    return points + velocity - step, velocity
+
+
 ROOM_FEATURES = 5
 """Per human, for a model that knows the room: the room's centre seen from the human (in the
 frame of its heading, over the half-size of the area where goals are drawn), the distance ahead
@@ -105,6 +115,17 @@ def advance_pose(
     x = pose[:, 0] + step * torch.cos(theta)
     y = pose[:, 1] + step * torch.sin(theta)
     return torch.stack([x, y, theta], dim=-1)
+
+
+def advance_pose_holonomic(
+    pose: torch.Tensor, vx: torch.Tensor, vy: torch.Tensor, dt: float
+) -> torch.Tensor:
+    """The holonomic robot's room pose (B, 3) after a step of ``(vx, vy)·dt`` in its frame, its
+    heading unchanged: the torch twin of :func:`socnav_wm.worldmodel.ego.advance_pose`."""
+    c, s = torch.cos(pose[:, 2]), torch.sin(pose[:, 2])
+    x = pose[:, 0] + (vx * c - vy * s) * dt
+    y = pose[:, 1] + (vx * s + vy * c) * dt
+    return torch.stack([x, y, pose[:, 2]], dim=-1)
 
 
 def room_features(
@@ -141,7 +162,10 @@ def heading_of(velocity: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 class ResidualDynamics(nn.Module):
     """``f``: each human's change of velocity per step (B, H, 2) from the positions (B, 1 + H, 2)
-    and velocities (B, 1 + H, 2) of the goal and the humans, and the robot's command (B,) ×2.
+    and velocities (B, 1 + H, 2) of the goal and the humans, and the robot's command (B,) ×2:
+    a row of the env's command table (:func:`socnav_wm.env.core.discrete_commands`), ``(v, ω)``
+    for the unicycle, ``(vx, vy)`` in the robot's frame for a holonomic model (the methods name
+    the two ``v`` and ``omega`` after the unicycle's).
 
     Args:
         num_humans: humans in the scene.
@@ -155,6 +179,8 @@ class ResidualDynamics(nn.Module):
         neighbours: how many other humans each human sees, nearest first (the K nearest, in
             slots by distance, as social pooling does), or None: every other human in spawn
             order (the paper preset's models). The robot always has its own slot.
+        holonomic: the robot translates by its command ``(vx, vy)`` and never turns
+            (CrowdNav's robot); its turn feature is then always 0.
     """
 
     def __init__(
@@ -165,9 +191,11 @@ class ResidualDynamics(nn.Module):
         max_speed: float | None = None,
         room_half: float | None = None,
         neighbours: int | None = None,
+        holonomic: bool = False,
     ) -> None:
         super().__init__()
         self.num_humans, self.dt, self.max_speed = num_humans, dt, max_speed
+        self.holonomic = bool(holonomic)
         self.room_half = room_half
         if neighbours is not None and neighbours < 1:
             raise ValueError(f"neighbours: expected at least 1 (or None), got {neighbours}")
@@ -209,6 +237,8 @@ class ResidualDynamics(nn.Module):
         robot_p = torch.zeros_like(p[:, :1])
         robot_u = torch.zeros_like(u[:, :1])
         robot_u[..., 0] = (v * self.dt)[:, None]
+        if self.holonomic:  # the command is the robot's velocity (vx, vy); it never turns
+            robot_u[..., 1] = (omega * self.dt)[:, None]
         others_p = torch.cat([p, robot_p], dim=1)  # (B, H + 1, 2)
         others_u = torch.cat([u, robot_u], dim=1)
         rel_p = others_p[:, None, :, :] - p[:, :, None, :]  # (B, H, H + 1, 2)
@@ -223,7 +253,11 @@ class ResidualDynamics(nn.Module):
             rel_u = torch.cat([rel_u[:, :, : h - 1].gather(2, index), rel_u[:, :, h - 1 :]], 2)
         cs, ss = c[..., None], s[..., None]
         rel = torch.cat([_rotate(rel_p, cs, ss), _rotate(rel_u, cs, ss)], dim=-1)
-        turn = (omega * self.dt)[:, None, None].expand(-1, h, 1)
+        turn = (
+            torch.zeros_like(speed[..., None])
+            if self.holonomic
+            else (omega * self.dt)[:, None, None].expand(-1, h, 1)
+        )
         lead = torch.full_like(speed[..., None], IMAGINED_UNIT * imagined)
         parts = [speed[..., None], rel.reshape(*rel.shape[:2], -1), turn, lead]
         if self.room_half is not None:
@@ -264,6 +298,11 @@ class ResidualDynamics(nn.Module):
             length = torch.linalg.vector_norm(humans, dim=-1, keepdim=True)
             humans = humans * torch.clamp(limit / length.clamp(min=1e-12), max=1.0)
         velocity = torch.cat([velocity[:, :1], humans], dim=1)
+        if self.holonomic:
+            points, velocity = ego_advance_holonomic(points, velocity, v, omega, self.dt)
+            if pose is not None:
+                pose = advance_pose_holonomic(pose, v, omega, self.dt)
+            return points, velocity, pose
         points, velocity = ego_advance(points, velocity, v, omega, self.dt)
         if pose is not None:
             pose = advance_pose(pose, v, omega, self.dt)
@@ -417,11 +456,6 @@ def train_residual(
     the first ones', decide alone; with 1 every step counts relative to constant velocity.
     Validation uses the plain mean (the metric). ``horizon``, ``stride`` and ``val_fraction``
     are the caller's (the samples are already made)."""
-    if env_params.kinematics != "unicycle":
-        raise ValueError(
-            "env.kinematics: the planning model imagines the unicycle robot's own motion; "
-            f"it cannot be trained for a {env_params.kinematics} robot"
-        )
     room, relative_weight = params.room, params.relative_weight
     torch.manual_seed(seed)
     model = build_trainable(
@@ -434,6 +468,7 @@ def train_residual(
             env_params.human_max_speed,
             env_params.spawn_half_size if room else None,
             params.neighbours,
+            env_params.kinematics == "holonomic",
         ),
     )
     if room and (train.pose is None or val.pose is None):

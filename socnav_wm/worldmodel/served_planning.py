@@ -11,8 +11,9 @@ from socnav_wm.worldmodel.residual import ResidualDynamics
 class ServedPlanningModel(nn.Module):
     """The planning model's correction of each human's velocity for one step, from one row per
     scene: the goal's and the humans' positions ((1 + H) × 2), their velocities ((1 + H) × 2),
-    the robot's command v and ω, and for a model that knows the room the robot's pose (x, y,
-    θ); all in the robot's frame as :meth:`ResidualDynamics.forward` takes them → (batch, H, 2).
+    the robot's command (v and ω; vx and vy for a holonomic model), and for a model that knows
+    the room the robot's pose (x, y, θ); all in the robot's frame as
+    :meth:`ResidualDynamics.forward` takes them → (batch, H, 2).
     """
 
     def __init__(self, model: ResidualDynamics) -> None:
