@@ -82,8 +82,9 @@ class PlanningModelParams(Section):
     """Adam's first step, decayed to zero over ``max_epochs`` (cosine)."""
     batch_size: int = Field(1024, gt=0)
     """Samples per update."""
-    max_epochs: int = Field(14, gt=0)
-    """Epochs at most."""
+    max_epochs: int = Field(14, ge=0)
+    """Epochs at most; 0 writes the untrained model, constant velocity itself (a control:
+    ``wm-mpc`` on it plans as ``cv-mpc``, ``wm-mpc-q`` as ``cv-mpc`` with the critic)."""
     patience: int = Field(5, gt=0)
     """Epochs without a better validation loss before stopping (the best epoch is kept)."""
     val_fraction: float = Field(0.05, gt=0, lt=1, allow_inf_nan=False)

@@ -140,6 +140,25 @@ def train_and_validation(rec, horizon: int) -> list[residual.Sequences]:
     ]
 
 
+def test_zero_epochs_write_constant_velocity_itself(recording) -> None:
+    seqs = train_and_validation(recording, horizon=6)
+    params = PlanningModelParams(hidden_dim=16, max_epochs=0, room=False)
+    result = residual.train_residual(*seqs, ENV, params, seed=0)
+    m = result.metrics
+    assert (m["best_epoch"], m["epochs"]) == (0, 0)
+    assert m["val_loss"] == m["val_loss_constant_velocity"]
+    v = seqs[1]
+    start = (v.previous_obs, v.obs, v.previous_action)
+    np.testing.assert_array_equal(
+        residual.residual_positions(result.model, *start, v.actions, ENV),
+        residual.residual_positions(
+            residual.ResidualDynamics(3, 16, ENV.dt, ENV.human_max_speed), *start, v.actions, ENV
+        ),
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="max_epochs"):
+        PlanningModelParams(max_epochs=-1)
+
+
 def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> None:
     seqs = train_and_validation(recording, horizon=6)
     result = residual.train_residual(
