@@ -39,13 +39,17 @@ OTHER_PLANNERS: dict[str, str] = {
     "wm-mpc": "wm-mpc",
     "oracle-mpc (blind)": "blind/oracle-mpc",
     "wm-mpc-q": "wm-mpc-q",
+    "cv-mpc-q": "cv-q/wm-mpc-q",
 }
 """Planners evaluated in some presets only, after the others in the table and compared with
 ``cv-mpc`` and ``oracle-mpc`` where they were: name → their files' path under the preset's
 folders without the suffix. ``wm-mpc`` plans on a model learned in the preset; ``oracle-mpc
 (blind)`` is ``oracle-mpc`` whose clones' humans do not react to the robot
 (``planning.oracle_reactions`` false): what knowing that reaction is worth; ``wm-mpc-q`` is
-``wm-mpc`` with a critic trained in the preset (its value at the horizon, its actions)."""
+``wm-mpc`` with a critic trained in the preset (its value at the horizon, its actions);
+``cv-mpc-q`` is ``wm-mpc-q`` on constant velocity (an untrained planning model) with the same
+critic: what the critic alone adds to ``cv-mpc``, and what the learned model adds to it
+(:attr:`ScenarioTable.model_gain`)."""
 
 TABLE_METRICS: tuple[tuple[str, str], ...] = (
     ("success", "success"),
@@ -138,6 +142,9 @@ class ScenarioTable:
     """preset → agent variant → its seeds' test metrics (``seeds``, and per metric of
     :data:`DQN_METRICS` the mean and 95% t-interval over seeds) from the preset's study
     (``{preset}/dqn/results.parquet``, ``socnav-wm sweep``'s output)."""
+    model_gain: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """preset → the paired success difference (points) of ``wm-mpc-q`` from ``cv-mpc-q``: the
+    learned model's worth with the same critic, where both were evaluated."""
     split: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the planning model's humans' error split by interaction under the policy it
     plans with (``policy``, ``distance``, ``k`` and per interaction ``share``, constant
@@ -184,6 +191,18 @@ class ScenarioTable:
                         f"{a['high']:+.1f}] | {_p(a['p_value'])} | {b['difference']:+.1f} "
                         f"[{b['low']:+.1f}, {b['high']:+.1f}] | {_p(b['p_value'])} |"
                     )
+        if self.model_gain:
+            lines += [
+                "",
+                "| preset | `wm-mpc-q` − `cv-mpc-q`: the learned model, the same critic "
+                "(points, paired) | p |",
+                "|---|---|---|",
+            ]
+            for preset, gain in self.model_gain.items():
+                lines.append(
+                    f"| `{preset}` | {gain['difference']:+.1f} [{gain['low']:+.1f}, "
+                    f"{gain['high']:+.1f}] | {_p(gain['p_value'])} |"
+                )
         if self.dqn:
             lines += ["", *self.dqn_rows()]
         if self.transfer:
@@ -299,6 +318,7 @@ class ScenarioTable:
             "learned": self.learned,
             "transfer": self.transfer,
             "dqn": self.dqn,
+            "model_gain": self.model_gain,
             "split": self.split,
         }
 
@@ -334,6 +354,7 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     transfer: dict[str, dict[str, dict[str, Any]]] = {}
     dqn: dict[str, dict[str, dict[str, Any]]] = {}
     split: dict[str, dict[str, Any]] = {}
+    model_gain: dict[str, dict[str, Any]] = {}
     missing: list[str] = []
     for preset in presets:
         prediction = metrics_dir / preset / "prediction.json"
@@ -372,6 +393,8 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                     "versus_physics": _paired(others[name], physics),
                     "versus_oracle": _paired(others[name], oracle),
                 }
+            if "wm-mpc-q" in others and "cv-mpc-q" in others:
+                model_gain[preset] = _paired(others["wm-mpc-q"], others["cv-mpc-q"])
             native = others.get("wm-mpc")
             for path in sorted((metrics_dir / preset / TRANSFER_DIR).glob("*/wm-mpc.json")):
                 trained = path.parent.name
@@ -388,7 +411,9 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
         raise ValueError(
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
-    return ScenarioTable(summaries, gaps, missing, learned, transfer, dqn, split)
+    return ScenarioTable(
+        summaries, gaps, missing, learned, transfer, dqn, model_gain=model_gain, split=split
+    )
 
 
 def _table_metrics(path: Path) -> dict[str, dict[str, float]]:

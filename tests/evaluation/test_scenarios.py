@@ -207,6 +207,33 @@ def test_the_blind_oracle_is_paired_with_physics_and_the_oracle_where_it_ran(
     assert "| `dense` | `oracle-mpc (blind)` | 95.0 [" in document.read_text()
 
 
+def test_the_critic_on_constant_velocity_is_the_control_of_the_learned_model(
+    tmp_path: Path,
+) -> None:
+    physics = np.r_[np.zeros(20), np.ones(80)]
+    critic_only = np.r_[np.zeros(12), np.ones(88)]  # the critic saves 8 of the 20
+    learned = np.r_[np.zeros(4), np.ones(96)]  # the model 8 more
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, np.ones(100) if method == "oracle-mpc" else physics)
+    _write(tmp_path, "dense", "wm-mpc-q", learned)
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    _run(tmp_path, ("dense",), document)
+    assert json.loads((tmp_path / "summary.json").read_text())["model_gain"] == {}
+    assert "`cv-mpc-q`" not in document.read_text()  # no control, no row
+    for folder in ("metrics", "data"):
+        (tmp_path / folder / "dense" / "cv-q").mkdir(parents=True)
+    _write(tmp_path, "dense", "cv-q/wm-mpc-q", critic_only)
+    _run(tmp_path, ("dense",), document)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["model_gain"]["dense"]["difference"] == pytest.approx(8.0)
+    versus = summary["learned"]["dense"]["cv-mpc-q"]["versus_physics"]
+    assert versus["difference"] == pytest.approx(8.0)
+    text = document.read_text()
+    assert "| `dense` | `cv-mpc-q` | 88.0 [" in text
+    assert "| `dense` | +8.0 [" in text
+
+
 def test_a_model_of_another_preset_is_paired_with_physics_and_the_native_model(
     tmp_path: Path,
 ) -> None:
