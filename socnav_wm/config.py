@@ -408,6 +408,8 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "scenario_dqn": ("env", "eval", "agent", "studies.presets"),
     "scenario_critic": ("env", "agent"),
     "scenario_wm_mpc_q": ("env", "eval", "planning"),
+    "scenario_cv_model": ("env", "planning_model"),
+    "scenario_cv_q": ("env", "eval", "planning"),
     "scenarios_report": (),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted
