@@ -195,19 +195,24 @@ def test_weighting_the_humans_near_the_robot_changes_the_training(recording) -> 
     assert plain != trained(near_robot_weight=10.0)
 
 
-def test_a_planner_on_the_untrained_model_scores_as_cv_mpc(recording) -> None:
+def assert_plans_as_cv_mpc(net: residual.ResidualDynamics, env: EnvParams, rec) -> None:
+    """A planner on ``net`` scores the recording's second step as ``cv-mpc`` does."""
     planning = PlanningParams(horizon=4, prefix_length=2)
-    ours = ResidualPlanningModel(residual.ResidualDynamics(3, 8, ENV.dt), ENV)
-    cv = ConstantVelocityModel(ENV)
+    ours = ResidualPlanningModel(net, env)
+    cv = ConstantVelocityModel(env)
     for model in (ours, cv):
-        model.reset(recording.obs[0])
-        model.observe(recording.obs[1], recording.actions[0])
+        model.reset(rec.obs[0])
+        model.observe(rec.obs[1], rec.actions[0])
     # The residual model imagines in float32, constant velocity in float64.
     np.testing.assert_allclose(
-        Planner(ours, planning, ENV).scores(recording.obs[1][:, :2]),
-        Planner(cv, planning, ENV).scores(recording.obs[1][:, :2]),
+        Planner(ours, planning, env).scores(rec.obs[1][:, :2]),
+        Planner(cv, planning, env).scores(rec.obs[1][:, :2]),
         atol=1e-4,
     )
+
+
+def test_a_planner_on_the_untrained_model_scores_as_cv_mpc(recording) -> None:
+    assert_plans_as_cv_mpc(residual.ResidualDynamics(3, 8, ENV.dt), ENV, recording)
 
 
 def test_save_and_load_round_trip_and_refuse_other_files(tmp_path) -> None:

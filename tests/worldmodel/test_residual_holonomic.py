@@ -10,14 +10,11 @@ import torch
 from socnav_wm.config import load_params
 from socnav_wm.env.core import Simulator
 from socnav_wm.io import ModelFileError
-from socnav_wm.planning.models import ConstantVelocityModel
-from socnav_wm.planning.mpc import Planner
-from socnav_wm.planning.params import PlanningParams
-from socnav_wm.planning.residual import ResidualPlanningModel
 from socnav_wm.worldmodel import planning_file, residual
 from socnav_wm.worldmodel.ego import commands_of, predict_positions
 from socnav_wm.worldmodel.params import PlanningModelParams
 from socnav_wm.worldmodel.prediction import random_policy, record
+from tests.worldmodel.test_residual import assert_plans_as_cv_mpc, rows_of
 
 CROWDNAV = load_params(overlays=["configs/scenarios/crowdnav.yaml"]).env
 UNICYCLE = CROWDNAV.replace(kinematics="unicycle")
@@ -80,25 +77,12 @@ def test_the_robot_seen_by_a_holonomic_model_moves_sideways_and_never_turns() ->
 
 
 def test_a_planner_on_the_untrained_holonomic_model_scores_as_cv_mpc(recording) -> None:
-    planning = PlanningParams(horizon=4, prefix_length=2)
-    ours = ResidualPlanningModel(model(), CROWDNAV)
-    cv = ConstantVelocityModel(CROWDNAV)
-    for m in (ours, cv):
-        m.reset(recording.obs[0])
-        m.observe(recording.obs[1], recording.actions[0])
-    # The residual model imagines in float32, constant velocity in float64.
-    np.testing.assert_allclose(
-        Planner(ours, planning, CROWDNAV).scores(recording.obs[1][:, :2]),
-        Planner(cv, planning, CROWDNAV).scores(recording.obs[1][:, :2]),
-        atol=1e-4,
-    )
+    assert_plans_as_cv_mpc(model(), CROWDNAV, recording)
 
 
 def test_a_holonomic_training_is_saved_as_one_and_refused_for_the_unicycle(
     recording, tmp_path
 ) -> None:
-    from tests.worldmodel.test_residual import rows_of
-
     obs, actions, ids, next_obs, poses = rows_of(recording, with_poses=True)
     train = np.isin(ids, np.arange(40))
     seqs = [
