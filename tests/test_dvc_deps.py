@@ -125,7 +125,8 @@ def test_predict_measures_every_planning_model_seed() -> None:
 def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: Path) -> None:
     """Real `dvc status` in a copy of the repository: after an edit of the renderer, only the
     stages that draw are stale; of the robot controllers, only the robots' evaluations; of the
-    reward, every stage that runs the simulator."""
+    reward, every stage that runs the simulator; of the planning model's training, only the
+    trainings (the planners and `predict` that read a trained model do not execute it)."""
     from tests.test_dvc import _dvc, _project_files
 
     copy = tmp_path / "repo"
@@ -136,7 +137,12 @@ def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: 
     subprocess.run([*git, "init", "-q"], cwd=copy, check=True)
     subprocess.run([*git, "add", "-A"], cwd=copy, check=True)
     subprocess.run([*git, "commit", "-q", "-m", "copy"], cwd=copy, check=True)
-    edited = ("socnav_wm/env/render.py", "socnav_wm/agents/baselines.py", "socnav_wm/env/reward.py")
+    edited = (
+        "socnav_wm/env/render.py",
+        "socnav_wm/agents/baselines.py",
+        "socnav_wm/env/reward.py",
+        "socnav_wm/worldmodel/residual_training.py",
+    )
     for name in edited:
         with (copy / name).open("a", encoding="utf-8") as handle:
             handle.write("\n# an edit\n")
@@ -159,6 +165,19 @@ def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: 
     agents = {stage for stage in status if stage.startswith("train_agent@")}
     assert agents and runs_the_simulator | agents <= stale["socnav_wm/env/reward.py"]
     assert not {"train_vae", "train_lstm"} & stale["socnav_wm/env/reward.py"]
+    trainings = {
+        stage
+        for stage in status
+        if stage.startswith(
+            (
+                "train_planning_model@",
+                "scenarios/dvc.yaml:scenario_planning_model@",
+                "scenarios/dvc.yaml:scenario_cv_model@",
+            )
+        )
+    }
+    assert len(trainings) >= 3
+    assert stale["socnav_wm/worldmodel/residual_training.py"] == trainings
 
 
 def test_every_output_of_dvc_yaml_is_a_layout_path() -> None:

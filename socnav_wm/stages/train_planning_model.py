@@ -18,7 +18,7 @@ from socnav_wm.stages.common import (
     world_model_stage,
 )
 from socnav_wm.worldmodel.planning_file import save_residual
-from socnav_wm.worldmodel.residual import fit_residual
+from socnav_wm.worldmodel.residual_training import fit_residual
 from socnav_wm.worldmodel.served_planning import ServedPlanningModel
 
 

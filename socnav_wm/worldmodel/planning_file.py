@@ -13,17 +13,30 @@ that knows the room, the area where it expects the goals.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from socnav_wm.data.compatibility import check_made_with
 from socnav_wm.env.params import EnvParams
 from socnav_wm.io import ModelFileError, check_format, first_line, load_torch_file, torch_bytes
-from socnav_wm.worldmodel.residual import ResidualDynamics, ResidualTrainResult
+from socnav_wm.worldmodel.residual import ResidualDynamics
 
 PLANNING_MODEL_FORMAT = "socnav-wm residual-cv"
 PLANNING_MODEL_FORMAT_VERSION = 1
 WHAT = "planning model"
+
+
+@dataclass
+class ResidualTrainResult:
+    """A trained planning model as :func:`save_residual` writes it
+    (:func:`socnav_wm.worldmodel.residual_training.train_residual` makes one)."""
+
+    model: ResidualDynamics
+    history: list[dict[str, float]]
+    metrics: dict[str, float]
+    env: dict[str, Any] | None = None
+    """The scenarios it was trained for (:func:`socnav_wm.data.compatibility.made_with`)."""
 
 
 def save_residual(path: Any, result: ResidualTrainResult, settings: dict[str, Any]) -> None:

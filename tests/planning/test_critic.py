@@ -19,8 +19,8 @@ from socnav_wm.planning.models import ConstantVelocityModel
 from socnav_wm.planning.mpc import FORWARD, LEFT, RIGHT, STOP, Planner
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.worldmodel.ego import commands_of
-from socnav_wm.worldmodel.planning_file import save_residual
-from socnav_wm.worldmodel.residual import ResidualDynamics, ResidualTrainResult
+from socnav_wm.worldmodel.planning_file import ResidualTrainResult, save_residual
+from socnav_wm.worldmodel.residual import ResidualDynamics
 
 ENV = EnvParams()
 FAR = [(8.0, 8.0), (-8.0, 8.0), (-8.0, -8.0)]

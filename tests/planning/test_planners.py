@@ -23,9 +23,9 @@ from socnav_wm.planning.params import PlanningParams
 from socnav_wm.planning.vae_lstm import VaeLstmModel
 from socnav_wm.worldmodel.files import save_lstm, save_vae
 from socnav_wm.worldmodel.lstm import LatentLSTM
-from socnav_wm.worldmodel.planning_file import save_residual
+from socnav_wm.worldmodel.planning_file import ResidualTrainResult, save_residual
 from socnav_wm.worldmodel.prediction import model_positions, random_policy, record
-from socnav_wm.worldmodel.residual import ResidualDynamics, ResidualTrainResult
+from socnav_wm.worldmodel.residual import ResidualDynamics
 from socnav_wm.worldmodel.vae import VAE
 
 ENV = EnvParams()

@@ -11,7 +11,7 @@ from socnav_wm.planning.models import ConstantVelocityModel
 from socnav_wm.planning.mpc import Planner
 from socnav_wm.planning.params import PlanningParams
 from socnav_wm.planning.residual import ResidualPlanningModel
-from socnav_wm.worldmodel import planning_file, residual
+from socnav_wm.worldmodel import planning_file, residual, residual_training
 from socnav_wm.worldmodel.ego import advance, commands_of, positions, predict_positions
 from socnav_wm.worldmodel.params import PlanningModelParams
 from socnav_wm.worldmodel.prediction import random_policy, record
@@ -77,7 +77,7 @@ def test_a_corrected_human_never_outruns_the_top_speed_and_the_cap_keeps_cv(reco
                                atol=1e-5)  # fmt: skip
     with torch.no_grad():
         capped.net[-1].bias.fill_(100.0)  # pushes every human by ~1.4 m per step
-    points, velocity = residual._start(*start, ENV)
+    points, velocity = residual.present_state(*start, ENV)
     v, w = (torch.zeros(len(points), dtype=torch.float64),) * 2  # the robot stands still
     p0 = torch.from_numpy(points)
     p1, _, _ = capped.double().step(p0, torch.from_numpy(velocity), v, w)
@@ -107,7 +107,7 @@ def test_positions_do_not_depend_on_the_batch_size(recording) -> None:
 
 def test_sequences_follow_the_episodes_and_mask_their_ends(recording) -> None:
     obs, actions, ids, next_obs = rows_of(recording)
-    seqs = residual.make_sequences(obs, actions, ids, next_obs, horizon=5, stride=3)
+    seqs = residual_training.make_sequences(obs, actions, ids, next_obs, horizon=5, stride=3)
     assert len(seqs) > 0
     for i in range(len(seqs)):
         # Find the sample's episode and step from its present observation.
@@ -131,11 +131,11 @@ def test_sequences_follow_the_episodes_and_mask_their_ends(recording) -> None:
             break
 
 
-def train_and_validation(rec, horizon: int) -> list[residual.Sequences]:
+def train_and_validation(rec, horizon: int) -> list[residual_training.Sequences]:
     """Training samples from the recording's first 36 episodes, validation from the rest."""
     obs, actions, ids, next_obs = rows_of(rec)
     return [
-        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon, stride=2)
+        residual_training.make_sequences(obs[m], actions[m], ids[m], next_obs[m], horizon, stride=2)
         for m in (ids < 36, ids >= 36)
     ]
 
@@ -143,7 +143,7 @@ def train_and_validation(rec, horizon: int) -> list[residual.Sequences]:
 def test_zero_epochs_write_constant_velocity_itself(recording) -> None:
     seqs = train_and_validation(recording, horizon=6)
     params = PlanningModelParams(hidden_dim=16, max_epochs=0, room=False)
-    result = residual.train_residual(*seqs, ENV, params, seed=0)
+    result = residual_training.train_residual(*seqs, ENV, params, seed=0)
     m = result.metrics
     assert (m["best_epoch"], m["epochs"]) == (0, 0)
     assert m["val_loss"] == m["val_loss_constant_velocity"]
@@ -161,7 +161,7 @@ def test_zero_epochs_write_constant_velocity_itself(recording) -> None:
 
 def test_a_real_training_beats_copy_last_and_keeps_its_best_epoch(recording) -> None:
     seqs = train_and_validation(recording, horizon=6)
-    result = residual.train_residual(
+    result = residual_training.train_residual(
         *seqs, ENV, PlanningModelParams(hidden_dim=16, learning_rate=1e-3, batch_size=32,
         max_epochs=3, patience=2, relative_weight=0.0, room=False), seed=0,
     )  # fmt: skip
@@ -187,7 +187,7 @@ def test_weighting_the_humans_near_the_robot_changes_the_training(recording) -> 
     def trained(**weight) -> list[float]:  # the training loss of each epoch
         params = PlanningModelParams(hidden_dim=8, learning_rate=1e-3, batch_size=32,
                                      max_epochs=2, patience=2, room=False, **weight)  # fmt: skip
-        result = residual.train_residual(*seqs, ENV, params, seed=0)
+        result = residual_training.train_residual(*seqs, ENV, params, seed=0)
         return [row["train_loss"] for row in result.history[1:]]
 
     plain = trained()
@@ -217,7 +217,7 @@ def test_a_planner_on_the_untrained_model_scores_as_cv_mpc(recording) -> None:
 
 def test_save_and_load_round_trip_and_refuse_other_files(tmp_path) -> None:
     model = perturbed(2)
-    result = residual.ResidualTrainResult(model=model, history=[], metrics={})
+    result = planning_file.ResidualTrainResult(model=model, history=[], metrics={})
     path = tmp_path / "m.pt"
     planning_file.save_residual(path, result, {"seed": 0})
     loaded = planning_file.load_residual(path)
@@ -261,7 +261,7 @@ def test_advance_pose_is_the_simulator_unicycle_for_every_action() -> None:
 
 def test_sequences_carry_the_pose_each_observation_was_seen_from(recording) -> None:
     obs, actions, ids, next_obs, pose_after = rows_of(recording, with_poses=True)
-    seqs = residual.make_sequences(obs, actions, ids, next_obs, 5, 3, pose_after)
+    seqs = residual_training.make_sequences(obs, actions, ids, next_obs, 5, 3, pose_after)
     for i in range(0, len(seqs), 7):
         n, t = next(
             (n, t)
@@ -276,10 +276,12 @@ def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording
     obs, actions, ids, next_obs, pose_after = rows_of(recording, with_poses=True)
     train, val = ids < 36, ids >= 36
     seqs = [
-        residual.make_sequences(obs[m], actions[m], ids[m], next_obs[m], 6, 2, pose_after[m])
+        residual_training.make_sequences(
+            obs[m], actions[m], ids[m], next_obs[m], 6, 2, pose_after[m]
+        )
         for m in (train, val)
     ]
-    result = residual.train_residual(
+    result = residual_training.train_residual(
         *seqs, ENV, PlanningModelParams(hidden_dim=16, learning_rate=1e-3, batch_size=32,
         max_epochs=2, patience=2, room=True, relative_weight=0.5), seed=0,
     )  # fmt: skip
@@ -295,11 +297,11 @@ def test_a_model_that_knows_the_room_needs_the_pose_and_learns_with_it(recording
     planner_model.reset(v.obs[:2])
     with pytest.raises(ValueError, match="planning.walls"):
         planner_model.rollout(4)
-    no_poses = residual.make_sequences(
+    no_poses = residual_training.make_sequences(
         obs[train], actions[train], ids[train], next_obs[train], 6, 2
     )
     with pytest.raises(ValueError, match="carry no robot poses"):
-        residual.train_residual(
+        residual_training.train_residual(
             no_poses, seqs[1], ENV, PlanningModelParams(hidden_dim=8, learning_rate=1e-3,
             batch_size=32, max_epochs=1, patience=1, relative_weight=0.0, room=True), seed=0,
         )  # fmt: skip
@@ -328,7 +330,7 @@ def test_a_model_of_the_nearest_neighbours_ignores_the_order_and_the_far_humans(
     moved[0, far] += 0.5 * (points[0, far] - points[0, 1])  # further away along the same line
     torch.testing.assert_close(model(moved, velocity, v, omega)[0, 0], out[0, 0])
     path = tmp_path / "k.pt"
-    result = residual.ResidualTrainResult(model=model, history=[], metrics={})
+    result = planning_file.ResidualTrainResult(model=model, history=[], metrics={})
     planning_file.save_residual(path, result, {"seed": 0})
     assert planning_file.load_residual(path).neighbours == 2
 

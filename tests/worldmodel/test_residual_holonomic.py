@@ -10,7 +10,7 @@ import torch
 from socnav_wm.config import load_params
 from socnav_wm.env.core import Simulator
 from socnav_wm.io import ModelFileError
-from socnav_wm.worldmodel import planning_file, residual
+from socnav_wm.worldmodel import planning_file, residual, residual_training
 from socnav_wm.worldmodel.ego import commands_of, predict_positions
 from socnav_wm.worldmodel.params import PlanningModelParams
 from socnav_wm.worldmodel.prediction import random_policy, record
@@ -86,14 +86,14 @@ def test_a_holonomic_training_is_saved_as_one_and_refused_for_the_unicycle(
     obs, actions, ids, next_obs, poses = rows_of(recording, with_poses=True)
     train = np.isin(ids, np.arange(40))
     seqs = [
-        residual.make_sequences(obs[r], actions[r], ids[r], next_obs[r], 6, 3, poses[r])
+        residual_training.make_sequences(obs[r], actions[r], ids[r], next_obs[r], 6, 3, poses[r])
         for r in (train, ~train)
     ]
     params = PlanningModelParams(
         hidden_dim=16, learning_rate=1e-3, batch_size=32, max_epochs=2, patience=2,
         relative_weight=0.0, room=True, neighbours=4,
     )  # fmt: skip
-    result = residual.train_residual(*seqs, CROWDNAV, params, seed=0)
+    result = residual_training.train_residual(*seqs, CROWDNAV, params, seed=0)
     assert result.model.holonomic
     assert result.metrics["val_loss"] <= result.metrics["val_loss_constant_velocity"]
     assert all(np.isfinite(row["train_loss"]) for row in result.history[1:])
