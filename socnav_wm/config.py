@@ -410,6 +410,8 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "scenario_wm_mpc_q": ("env", "eval", "planning"),
     "scenario_cv_model": ("env", "planning_model"),
     "scenario_cv_q": ("env", "eval", "planning"),
+    "scenario_model_seeds": ("env", "planning_model"),
+    "scenario_wm_mpc_q_seeds": ("env", "eval", "planning"),
     "scenarios_report": (),
 }
 """Per DVC stage, the parts of params.yaml it reads: dvc.yaml's ``params:`` lists (a dotted

@@ -165,16 +165,11 @@ def test_dvc_status_marks_only_the_stages_that_execute_an_edited_file(tmp_path: 
     agents = {stage for stage in status if stage.startswith("train_agent@")}
     assert agents and runs_the_simulator | agents <= stale["socnav_wm/env/reward.py"]
     assert not {"train_vae", "train_lstm"} & stale["socnav_wm/env/reward.py"]
-    trainings = {
+    trainings = {  # every stage that runs train-planning-model, in every pipeline
         stage
         for stage in status
-        if stage.startswith(
-            (
-                "train_planning_model@",
-                "scenarios/dvc.yaml:scenario_planning_model@",
-                "scenarios/dvc.yaml:scenario_cv_model@",
-            )
-        )
+        if STAGE_MODULES[stage.split(":")[-1].split("@")[0]]
+        == "socnav_wm.stages.train_planning_model"
     }
     assert len(trainings) >= 3
     assert stale["socnav_wm/worldmodel/residual_training.py"] == trainings

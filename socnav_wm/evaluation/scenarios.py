@@ -64,6 +64,11 @@ TABLE_METRICS: tuple[tuple[str, str], ...] = (
 DQN_METRICS: tuple[str, ...] = ("success", "human_collision", "max_steps")
 """The test metrics of the preset's agents that the report shows (rates)."""
 
+MODEL_SEED_DIR = "model-seed-"
+"""Under a preset's folders, ``model-seed-<S>/wm-mpc-q.*``: ``wm-mpc-q`` on the preset's planning
+model of training seed ``S`` (the pipeline's ``wm-mpc-q`` plans on seed 0), with the same critic:
+does the learned model's share hold for another training of it?"""
+
 TRANSFER_DIR = "transfer"
 """Under a tested-in preset's folders, ``transfer/<trained-in preset>/wm-mpc.*``: ``wm-mpc`` on
 the model of another preset (``evaluate --transfer``)."""
@@ -145,6 +150,11 @@ class ScenarioTable:
     model_gain: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the paired success difference (points) of ``wm-mpc-q`` from ``cv-mpc-q``: the
     learned model's worth with the same critic, where both were evaluated."""
+    model_seeds: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    """preset → training seed of its planning model (``"0"``: the pipeline's ``wm-mpc-q``) →
+    ``wm-mpc-q``'s ``success`` summary on that model and its paired success difference (points)
+    from ``cv-mpc-q`` (``versus_control``) and from ``cv-mpc`` (``versus_physics``), where
+    ``wm-mpc-q`` was evaluated on more than one seed (:data:`MODEL_SEED_DIR`)."""
     split: dict[str, dict[str, Any]] = field(default_factory=dict)
     """preset → the planning model's humans' error split by interaction under the policy it
     plans with (``policy``, ``distance``, ``k`` and per interaction ``share``, constant
@@ -203,6 +213,8 @@ class ScenarioTable:
                     f"| `{preset}` | {gain['difference']:+.1f} [{gain['low']:+.1f}, "
                     f"{gain['high']:+.1f}] | {_p(gain['p_value'])} |"
                 )
+        if self.model_seeds:
+            lines += ["", *self.model_seed_rows()]
         if self.dqn:
             lines += ["", *self.dqn_rows()]
         if self.transfer:
@@ -219,6 +231,29 @@ class ScenarioTable:
                 *published,
             ]
         return "\n".join(lines) + "\n"
+
+    def model_seed_rows(self) -> list[str]:
+        """``wm-mpc-q`` on each training seed of the preset's planning model, the same critic."""
+        lines = [
+            "| preset | planning model seed | `wm-mpc-q` success | − `cv-mpc-q`: the learned "
+            "model (points, paired) | p | − `cv-mpc` (points, paired) | p |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for preset, seeds in self.model_seeds.items():
+            for seed, row in seeds.items():
+                a, b = row["versus_control"], row["versus_physics"]
+                control = (
+                    "– | –"
+                    if a is None
+                    else f"{a['difference']:+.1f} [{a['low']:+.1f}, {a['high']:+.1f}] | "
+                    f"{_p(a['p_value'])}"
+                )
+                lines.append(
+                    f"| `{preset}` | {seed} | {_cell('success', row['success'])} | {control} | "
+                    f"{b['difference']:+.1f} [{b['low']:+.1f}, {b['high']:+.1f}] | "
+                    f"{_p(b['p_value'])} |"
+                )
+        return lines
 
     def dqn_rows(self) -> list[str]:
         """The paper's five agents trained in a preset, as a markdown table."""
@@ -319,6 +354,7 @@ class ScenarioTable:
             "transfer": self.transfer,
             "dqn": self.dqn,
             "model_gain": self.model_gain,
+            "model_seeds": self.model_seeds,
             "split": self.split,
         }
 
@@ -355,6 +391,7 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
     dqn: dict[str, dict[str, dict[str, Any]]] = {}
     split: dict[str, dict[str, Any]] = {}
     model_gain: dict[str, dict[str, Any]] = {}
+    model_seeds: dict[str, dict[str, dict[str, Any]]] = {}
     missing: list[str] = []
     for preset in presets:
         prediction = metrics_dir / preset / "prediction.json"
@@ -395,6 +432,28 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                 }
             if "wm-mpc-q" in others and "cv-mpc-q" in others:
                 model_gain[preset] = _paired(others["wm-mpc-q"], others["cv-mpc-q"])
+            seeds = sorted(
+                (metrics_dir / preset).glob(f"{MODEL_SEED_DIR}*/wm-mpc-q.json"),
+                key=lambda path: int(path.parent.name.removeprefix(MODEL_SEED_DIR)),
+            )
+            if seeds and "wm-mpc-q" in others:
+                control = others.get("cv-mpc-q")
+                runs = [("0", methods["wm-mpc-q"]["success"], others["wm-mpc-q"])]
+                for path in seeds:
+                    seed = path.parent.name.removeprefix(MODEL_SEED_DIR)
+                    episodes = _episodes(
+                        episodes_dir / preset / path.parent.name / "wm-mpc-q.parquet",
+                        f"wm-mpc-q on {preset}'s planning model of seed {seed}",
+                    )
+                    runs.append((seed, _table_metrics(path)["success"], episodes))
+                model_seeds[preset] = {
+                    seed: {
+                        "success": success,
+                        "versus_control": None if control is None else _paired(run, control),
+                        "versus_physics": _paired(run, physics),
+                    }
+                    for seed, success, run in runs
+                }
             native = others.get("wm-mpc")
             for path in sorted((metrics_dir / preset / TRANSFER_DIR).glob("*/wm-mpc.json")):
                 trained = path.parent.name
@@ -412,7 +471,15 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             f"no scenario evaluation found in {metrics_dir} (run `dvc repro scenarios/dvc.yaml`)"
         )
     return ScenarioTable(
-        summaries, gaps, missing, learned, transfer, dqn, model_gain=model_gain, split=split
+        summaries,
+        gaps,
+        missing,
+        learned,
+        transfer,
+        dqn,
+        model_gain=model_gain,
+        model_seeds=model_seeds,
+        split=split,
     )
 
 

@@ -64,6 +64,9 @@ STAGE_MODULES: dict[str, str] = {
     # scenarios/dvc.yaml: the control, wm-mpc-q on constant velocity (the untrained model).
     "scenario_cv_model": "socnav_wm.stages.train_planning_model",
     "scenario_cv_q": "socnav_wm.stages.evaluate",
+    # scenarios/dvc.yaml: more trainings of the planning model, and wm-mpc-q on each.
+    "scenario_model_seeds": "socnav_wm.stages.train_planning_model",
+    "scenario_wm_mpc_q_seeds": "socnav_wm.stages.evaluate",
     "scenarios_report": "socnav_wm.stages.scenarios_report",
 }
 """Stage name → the module its command runs."""
@@ -86,6 +89,7 @@ STAGE_METHODS: dict[str, tuple[str, ...]] = {
     "scenario_dqn": VARIANT_NAMES,
     "scenario_wm_mpc_q": ("wm-mpc-q",),
     "scenario_cv_q": ("wm-mpc-q",),
+    "scenario_wm_mpc_q_seeds": ("wm-mpc-q",),
 }
 """Stage name → the methods whose policies it builds (a ``foreach`` stage: over all its items).
 The registry imports a method's builder only when it builds a policy, out of the imports'

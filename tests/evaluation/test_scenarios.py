@@ -234,6 +234,45 @@ def test_the_critic_on_constant_velocity_is_the_control_of_the_learned_model(
     assert "| `dense` | +8.0 [" in text
 
 
+def test_more_trainings_of_the_planning_model_are_each_paired_with_the_control(
+    tmp_path: Path,
+) -> None:
+    physics = np.r_[np.zeros(20), np.ones(80)]
+    critic_only = np.r_[np.zeros(12), np.ones(88)]
+    seed_0 = np.r_[np.zeros(4), np.ones(96)]  # the model saves 8 of the critic's 12 failures
+    seed_1 = np.r_[np.zeros(10), np.ones(90)]  # another training of it saves 2
+    for method in SCENARIO_METHODS:
+        _write(tmp_path, "dense", method, np.ones(100) if method == "oracle-mpc" else physics)
+    _write(tmp_path, "dense", "wm-mpc-q", seed_0)
+    document = tmp_path / "doc.md"
+    document.write_text("<!-- socnav-wm:scenarios -->\n<!-- /socnav-wm:scenarios -->\n")
+    _run(tmp_path, ("dense",), document)
+    assert json.loads((tmp_path / "summary.json").read_text())["model_seeds"] == {}
+    for folder in ("metrics", "data"):
+        (tmp_path / folder / "dense" / "model-seed-1").mkdir(parents=True)
+    _write(tmp_path, "dense", "model-seed-1/wm-mpc-q", seed_1)
+    _run(tmp_path, ("dense",), document)  # without the control: paired with cv-mpc only
+    seeds = json.loads((tmp_path / "summary.json").read_text())["model_seeds"]["dense"]
+    assert seeds["1"]["versus_control"] is None
+    assert seeds["1"]["versus_physics"]["difference"] == pytest.approx(10.0)
+    assert "| `dense` | 1 | 90.0 [" in document.read_text()
+    for folder in ("metrics", "data"):
+        (tmp_path / folder / "dense" / "cv-q").mkdir(parents=True)
+    _write(tmp_path, "dense", "cv-q/wm-mpc-q", critic_only)
+    _run(tmp_path, ("dense",), document)
+    seeds = json.loads((tmp_path / "summary.json").read_text())["model_seeds"]["dense"]
+    assert list(seeds) == ["0", "1"]
+    assert seeds["0"]["versus_control"]["difference"] == pytest.approx(8.0)
+    assert seeds["1"]["versus_control"]["difference"] == pytest.approx(2.0)
+    assert seeds["0"]["success"]["mean"] == pytest.approx(0.96)
+    text = document.read_text()
+    assert "| `dense` | 0 | 96.0 [" in text and "| `dense` | 1 | 90.0 [" in text
+    # Its episodes gone (a fresh clone's): refused in one line naming the seed.
+    (tmp_path / "data" / "dense" / "model-seed-1" / "wm-mpc-q.parquet").unlink()
+    with pytest.raises(ValueError, match="planning model of seed 1"):
+        _run(tmp_path, ("dense",), document)
+
+
 def test_a_model_of_another_preset_is_paired_with_physics_and_the_native_model(
     tmp_path: Path,
 ) -> None:
