@@ -434,7 +434,7 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
                 model_gain[preset] = _paired(others["wm-mpc-q"], others["cv-mpc-q"])
             seeds = sorted(
                 (metrics_dir / preset).glob(f"{MODEL_SEED_DIR}*/wm-mpc-q.json"),
-                key=lambda path: int(path.parent.name.removeprefix(MODEL_SEED_DIR)),
+                key=lambda path: _model_seed(path.parent),
             )
             if seeds and "wm-mpc-q" in others:
                 control = others.get("cv-mpc-q")
@@ -481,6 +481,14 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
         model_seeds=model_seeds,
         split=split,
     )
+
+
+def _model_seed(folder: Path) -> int:
+    """The training seed in a ``model-seed-<S>`` folder's name (one line naming it if none)."""
+    seed = folder.name.removeprefix(MODEL_SEED_DIR)
+    if not seed.isdigit():
+        raise ValueError(f"{folder}: expected a folder named {MODEL_SEED_DIR}<seed>, e.g. 1")
+    return int(seed)
 
 
 def _table_metrics(path: Path) -> dict[str, dict[str, float]]:

@@ -271,6 +271,12 @@ def test_more_trainings_of_the_planning_model_are_each_paired_with_the_control(
     (tmp_path / "data" / "dense" / "model-seed-1" / "wm-mpc-q.parquet").unlink()
     with pytest.raises(ValueError, match="planning model of seed 1"):
         _run(tmp_path, ("dense",), document)
+    # A folder whose name holds no seed: refused in one line naming it.
+    (tmp_path / "metrics" / "dense" / "model-seed-1").rename(
+        tmp_path / "metrics" / "dense" / "model-seed-x"
+    )
+    with pytest.raises(ValueError, match="model-seed-x: expected a folder named model-seed-"):
+        _run(tmp_path, ("dense",), document)
 
 
 def test_a_model_of_another_preset_is_paired_with_physics_and_the_native_model(
