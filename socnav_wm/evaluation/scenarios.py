@@ -182,10 +182,7 @@ class ScenarioTable:
         ]
         for preset, gap in self.gaps.items():
             verdict = "yes" if gap["room"] else "no"
-            lines.append(
-                f"| `{preset}` | {gap['difference']:+.1f} [{gap['low']:+.1f}, "
-                f"{gap['high']:+.1f}] | {_p(gap['p_value'])} | {verdict} |"
-            )
+            lines.append(f"| `{preset}` | {_interval(gap)} | {_p(gap['p_value'])} | {verdict} |")
         if self.learned:
             lines += [
                 "",
@@ -197,9 +194,8 @@ class ScenarioTable:
                 for name, versus in planners.items():
                     a, b = versus["versus_physics"], versus["versus_oracle"]
                     lines.append(
-                        f"| `{preset}` | `{name}` | {a['difference']:+.1f} [{a['low']:+.1f}, "
-                        f"{a['high']:+.1f}] | {_p(a['p_value'])} | {b['difference']:+.1f} "
-                        f"[{b['low']:+.1f}, {b['high']:+.1f}] | {_p(b['p_value'])} |"
+                        f"| `{preset}` | `{name}` | {_interval(a)} | {_p(a['p_value'])} | "
+                        f"{_interval(b)} | {_p(b['p_value'])} |"
                     )
         if self.model_gain:
             lines += [
@@ -209,10 +205,7 @@ class ScenarioTable:
                 "|---|---|---|",
             ]
             for preset, gain in self.model_gain.items():
-                lines.append(
-                    f"| `{preset}` | {gain['difference']:+.1f} [{gain['low']:+.1f}, "
-                    f"{gain['high']:+.1f}] | {_p(gain['p_value'])} |"
-                )
+                lines.append(f"| `{preset}` | {_interval(gain)} | {_p(gain['p_value'])} |")
         if self.model_seeds:
             lines += ["", *self.model_seed_rows()]
         if self.dqn:
@@ -242,16 +235,10 @@ class ScenarioTable:
         for preset, seeds in self.model_seeds.items():
             for seed, row in seeds.items():
                 a, b = row["versus_control"], row["versus_physics"]
-                control = (
-                    "– | –"
-                    if a is None
-                    else f"{a['difference']:+.1f} [{a['low']:+.1f}, {a['high']:+.1f}] | "
-                    f"{_p(a['p_value'])}"
-                )
+                control = "– | –" if a is None else f"{_interval(a)} | {_p(a['p_value'])}"
                 lines.append(
                     f"| `{preset}` | {seed} | {_cell('success', row['success'])} | {control} | "
-                    f"{b['difference']:+.1f} [{b['low']:+.1f}, {b['high']:+.1f}] | "
-                    f"{_p(b['p_value'])} |"
+                    f"{_interval(b)} | {_p(b['p_value'])} |"
                 )
         return lines
 
@@ -285,12 +272,7 @@ class ScenarioTable:
                 cells = [_cell("success", result["success"])]
                 for key in ("versus_physics", "versus_native"):
                     d = result.get(key)
-                    cells.append(
-                        "–"
-                        if d is None
-                        else f"{d['difference']:+.1f} [{d['low']:+.1f}, "
-                        f"{d['high']:+.1f}] (p {_p(d['p_value'])})"
-                    )
+                    cells.append("–" if d is None else f"{_interval(d)} (p {_p(d['p_value'])})")
                 rows.append(f"| `{tested}` | `{trained}` | " + " | ".join(cells) + " |")
         return rows
 
@@ -370,6 +352,11 @@ def _cell(metric: str, summary: Mapping[str, float] | None) -> str:
     return f"{100 * summary['mean']:.1f} [{100 * summary['low']:.1f}, {100 * summary['high']:.1f}]"
 
 
+def _interval(paired: Mapping[str, Any]) -> str:
+    """A paired difference of :func:`_paired` as ``+d [+low, +high]`` (points)."""
+    return f"{paired['difference']:+.1f} [{paired['low']:+.1f}, {paired['high']:+.1f}]"
+
+
 def _p(value: float) -> str:
     return "–" if not math.isfinite(value) else ("< 0.001" if value < 0.001 else f"{value:.3f}")
 
@@ -433,19 +420,18 @@ def scenario_table(metrics_dir: Path, episodes_dir: Path, presets: Sequence[str]
             if "wm-mpc-q" in others and "cv-mpc-q" in others:
                 model_gain[preset] = _paired(others["wm-mpc-q"], others["cv-mpc-q"])
             seeds = sorted(
-                (metrics_dir / preset).glob(f"{MODEL_SEED_DIR}*/wm-mpc-q.json"),
-                key=lambda path: _model_seed(path.parent),
+                (_model_seed(path.parent), path)
+                for path in (metrics_dir / preset).glob(f"{MODEL_SEED_DIR}*/wm-mpc-q.json")
             )
             if seeds and "wm-mpc-q" in others:
                 control = others.get("cv-mpc-q")
                 runs = [("0", methods["wm-mpc-q"]["success"], others["wm-mpc-q"])]
-                for path in seeds:
-                    seed = path.parent.name.removeprefix(MODEL_SEED_DIR)
+                for seed, path in seeds:
                     episodes = _episodes(
                         episodes_dir / preset / path.parent.name / "wm-mpc-q.parquet",
                         f"wm-mpc-q on {preset}'s planning model of seed {seed}",
                     )
-                    runs.append((seed, _table_metrics(path)["success"], episodes))
+                    runs.append((str(seed), _table_metrics(path)["success"], episodes))
                 model_seeds[preset] = {
                     seed: {
                         "success": success,
